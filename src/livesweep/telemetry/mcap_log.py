@@ -1,0 +1,1106 @@
+"""MCAP logs of JSON messages with JSON Schemas: a small writer and reader.
+
+Contract (DESIGN.md §4.1): one channel per telemetry stream, message encoding ``json``, schema
+encoding ``jsonschema``, so Foxglove and other MCAP viewers plot the logs as they are.
+``log_time`` is the receive time and ``publish_time`` the vehicle time when the message carries
+one. Both are integer nanoseconds (uint64) on whatever epoch the producer uses.
+
+Writing
+-------
+:class:`McapLogWriter` wraps :class:`mcap.writer.Writer`:
+
+* Messages are encoded as compact JSON (``separators=(",", ":")``, ``allow_nan=False``).
+  Non-finite floats (NaN, +-inf), also nested in lists and dicts, are written as ``null`` and
+  counted per topic (:attr:`McapLogWriter.nonfinite_counts`); the counts go into a metadata
+  record named ``"livesweep.writer"`` when the writer is closed.
+* The output is byte-for-byte deterministic for identical calls: no wall clock, no randomness
+  (attachment ``create_time`` is the given ``log_time_ns``).
+* ``atomic=True`` (default, for simulators and batch tools) writes ``<path>.partial`` and renames
+  it onto ``path`` in :meth:`McapLogWriter.close`; an exception inside the ``with`` block, or
+  :meth:`McapLogWriter.abort`, deletes the partial file. ``atomic=False`` (live recording)
+  writes ``path`` directly and calls ``file.flush()`` every ``flush_every`` messages, so a
+  killed process loses at most the open chunk (``chunk_size`` bytes, uncompressed) plus the
+  messages since the last flush. Such an unfinished file can be read by the readers below
+  (``LogSummary.complete`` is False) and turned into a finished file by :func:`recover`.
+
+Reading
+-------
+:func:`read_messages`, :func:`read_summary`, :func:`read_metadata`, :func:`read_attachments`,
+:func:`read_fields` and :func:`recover` accept any MCAP file with JSON channels, not only files
+written here. A finished file is read through its summary and indexes
+(:func:`mcap.reader.make_reader`); an unfinished file (no footer: the writer was killed before
+``finish()``), on which ``make_reader`` fails, is read by streaming every record up to the
+truncated tail.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import numbers
+import os
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+from mcap.reader import make_reader
+from mcap.records import Attachment, Channel, Footer, Header, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
+from mcap.summary import Summary
+from mcap.well_known import MessageEncoding, SchemaEncoding
+from mcap.writer import CompressionType, Writer
+
+from livesweep.errors import LogFormatError
+
+__all__ = [
+    "WRITER_METADATA_NAME",
+    "McapLogWriter",
+    "LogMessage",
+    "LogSummary",
+    "read_messages",
+    "read_summary",
+    "read_metadata",
+    "read_attachments",
+    "read_fields",
+    "recover",
+]
+
+#: Name of the metadata record the writer adds on close (library and non-finite counts).
+WRITER_METADATA_NAME = "livesweep.writer"
+
+_MAGIC = b"\x89MCAP0\r\n"
+_UINT64_MAX = 2**64 - 1
+_COMPRESSION = {
+    "zstd": CompressionType.ZSTD,
+    "lz4": CompressionType.LZ4,
+    "none": CompressionType.NONE,
+}
+_JSON_SEPARATORS = (",", ":")
+
+
+# --------------------------------------------------------------------------------------------
+# helpers
+# --------------------------------------------------------------------------------------------
+
+
+def _check_time_ns(value: Any, what: str, where: str) -> int:
+    """Return ``value`` as an int if it is an integer number of nanoseconds in [0, 2**64)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise LogFormatError(
+            f"{where}: {what} must be an integer number of nanoseconds >= 0, "
+            f"got {value!r} ({type(value).__name__})"
+        )
+    v = int(value)
+    if v < 0 or v > _UINT64_MAX:
+        raise LogFormatError(
+            f"{where}: {what} must be an integer number of nanoseconds in [0, 2**64), got {v}"
+        )
+    return v
+
+
+def _sanitize(obj: Any, counter: list[int]) -> Any:
+    """Copy of ``obj`` with non-finite floats as None (counted in ``counter[0]``).
+
+    Tuples become lists; numpy arrays and numpy scalars become their Python equivalents. Other
+    types are returned unchanged (``json.dumps`` rejects the ones it cannot encode).
+    """
+    if isinstance(obj, float):
+        if math.isfinite(obj):
+            return obj
+        counter[0] += 1
+        return None
+    if isinstance(obj, dict):
+        return {k: _sanitize(v, counter) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_sanitize(v, counter) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _sanitize(obj.tolist(), counter)
+    if isinstance(obj, np.generic):
+        return _sanitize(obj.item(), counter)
+    return obj
+
+
+def _str_map(values: Mapping[Any, Any] | None, where: str) -> dict[str, str]:
+    if values is None:
+        return {}
+    if not isinstance(values, Mapping):
+        raise LogFormatError(f"{where}: expected a mapping of str to str, got {type(values).__name__}")
+    return {str(k): str(v) for k, v in values.items()}
+
+
+# --------------------------------------------------------------------------------------------
+# writer
+# --------------------------------------------------------------------------------------------
+
+
+class McapLogWriter:
+    """Write JSON messages on JSON-Schema channels to an MCAP file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The final log file. Its directory must exist and be writable; otherwise
+        :class:`~livesweep.errors.LogFormatError` is raised here, before anything is written.
+    library : str
+        Writer name stored in the MCAP header.
+    chunk_size : int
+        Uncompressed chunk size in bytes at which a chunk is compressed and written. Smaller
+        chunks lose less data when the process is killed (non-atomic mode) and compress worse.
+    compression : {"zstd", "lz4", "none"}
+        Chunk compression.
+    atomic : bool
+        If True, write ``<path>.partial`` and rename it onto ``path`` in :meth:`close` (an
+        existing ``path`` is replaced then). On an exception in the ``with`` block or on
+        :meth:`abort`, the partial file is deleted and nothing is left behind. A stale
+        ``<path>.partial`` from an earlier run is overwritten.
+        If False, write ``path`` directly (live recording; see ``flush_every``).
+    flush_every : int
+        Call ``file.flush()`` every this many messages (0: never). The open chunk is not
+        finished by this, so a killed process loses at most that chunk plus the messages
+        since the last flush.
+
+    Attributes
+    ----------
+    message_counts : dict[str, int]
+        Messages written per topic (a copy).
+    nonfinite_counts : dict[str, int]
+        Non-finite floats written as ``null`` per topic (a copy).
+
+    Notes
+    -----
+    Every call that can fail on bad input raises :class:`~livesweep.errors.LogFormatError`
+    naming the file and what is wrong. The output is deterministic: the same calls give the
+    same bytes.
+
+    Used as a context manager, a normal exit calls :meth:`close` and an exception calls
+    :meth:`abort` (which deletes the file in both modes) and re-raises. A live recorder that
+    wants to keep what it recorded on Ctrl-C must catch ``KeyboardInterrupt`` inside the block
+    (or call :meth:`close` itself).
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        library: str = "livesweep",
+        chunk_size: int = 256 * 1024,
+        compression: str = "zstd",
+        atomic: bool = True,
+        flush_every: int = 1000,
+    ) -> None:
+        self._path = Path(path)
+        where = str(self._path)
+        if compression not in _COMPRESSION:
+            raise LogFormatError(
+                f"{where}: unknown compression {compression!r}; use one of {sorted(_COMPRESSION)}"
+            )
+        if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size <= 0:
+            raise LogFormatError(f"{where}: chunk_size must be a positive int (bytes), got {chunk_size!r}")
+        if isinstance(flush_every, bool) or not isinstance(flush_every, int) or flush_every < 0:
+            raise LogFormatError(
+                f"{where}: flush_every must be an int >= 0 (messages; 0 = never), got {flush_every!r}"
+            )
+        if not isinstance(library, str):
+            raise LogFormatError(f"{where}: library must be a str, got {type(library).__name__}")
+        if self._path.is_dir():
+            raise LogFormatError(f"cannot write MCAP log {where}: it is a directory")
+        self._atomic = bool(atomic)
+        self._library = library
+        self._flush_every = flush_every
+        self._file_path = self._path.with_name(self._path.name + ".partial") if atomic else self._path
+        try:
+            self._file: BinaryIO | None = open(self._file_path, "wb")  # noqa: SIM115
+        except OSError as e:
+            raise LogFormatError(
+                f"cannot write MCAP log {where}: {e.strerror or type(e).__name__} "
+                f"({self._file_path})"
+            ) from e
+        self._writer = Writer(
+            self._file,
+            chunk_size=chunk_size,
+            compression=_COMPRESSION[compression],
+        )
+        self._writer.start(profile="", library=library)
+        self._state = "open"  # "open" | "closed" | "aborted"
+        self._schemas: dict[tuple[str, bytes], int] = {}
+        self._channels: dict[str, tuple[int, str, dict, dict[str, str]]] = {}
+        self._sequence: dict[str, int] = {}
+        self._message_counts: dict[str, int] = {}
+        self._nonfinite_counts: dict[str, int] = {}
+        self._metadata_names: set[str] = set()
+        self._attachment_names: set[str] = set()
+        self._since_flush = 0
+
+    # -- properties --------------------------------------------------------------------------
+
+    @property
+    def path(self) -> Path:
+        """The final log path (what :meth:`close` returns)."""
+        return self._path
+
+    @property
+    def file_path(self) -> Path:
+        """The file being written now (``<path>.partial`` in atomic mode, else ``path``)."""
+        return self._file_path
+
+    @property
+    def closed(self) -> bool:
+        """True after :meth:`close` or :meth:`abort`."""
+        return self._state != "open"
+
+    @property
+    def message_counts(self) -> dict[str, int]:
+        """Messages written per topic (0 for added topics without messages)."""
+        return dict(self._message_counts)
+
+    @property
+    def nonfinite_counts(self) -> dict[str, int]:
+        """Non-finite floats written as ``null`` per topic."""
+        return dict(self._nonfinite_counts)
+
+    @property
+    def topics(self) -> tuple[str, ...]:
+        """Topics added so far, in the order they were added."""
+        return tuple(self._channels)
+
+    # -- writing -----------------------------------------------------------------------------
+
+    def _check_open(self, what: str) -> None:
+        if self._state != "open":
+            raise LogFormatError(f"{self._path}: cannot {what}: the writer is {self._state}")
+
+    def add_channel(
+        self,
+        topic: str,
+        schema_name: str,
+        schema: dict,
+        metadata: dict[str, str] | None = None,
+    ) -> int:
+        """Add a JSON channel with a JSON Schema; idempotent per topic.
+
+        Parameters
+        ----------
+        topic : str
+            Channel topic, e.g. ``"/mavlink/ATTITUDE"`` or ``"/sim/truth"``.
+        schema_name : str
+            Schema name, e.g. ``"mavlink.ATTITUDE"``.
+        schema : dict
+            The JSON Schema (stored as compact JSON with schema encoding ``jsonschema``).
+            Identical schemas (same name and content) are stored once.
+        metadata : dict[str, str], optional
+            Channel metadata; keys and values are converted with ``str()``.
+
+        Returns
+        -------
+        int
+            The MCAP channel id. Adding the same topic again with the same schema name and
+            schema (and metadata, when given) returns the same id.
+
+        Raises
+        ------
+        LogFormatError
+            If the topic exists with a different schema or metadata, or an argument is invalid.
+        """
+        self._check_open("add a channel")
+        where = f"{self._path}: channel {topic!r}"
+        if not isinstance(topic, str) or not topic:
+            raise LogFormatError(f"{self._path}: topic must be a non-empty str, got {topic!r}")
+        if not isinstance(schema_name, str) or not schema_name:
+            raise LogFormatError(f"{where}: schema_name must be a non-empty str, got {schema_name!r}")
+        if not isinstance(schema, dict):
+            raise LogFormatError(f"{where}: schema must be a dict (a JSON Schema), got {type(schema).__name__}")
+        meta = _str_map(metadata, where + " metadata")
+        if topic in self._channels:
+            cid, old_name, old_schema, old_meta = self._channels[topic]
+            if old_name != schema_name or old_schema != schema:
+                raise LogFormatError(
+                    f"{where} already exists with schema {old_name!r}; "
+                    f"a different schema ({schema_name!r}) cannot be added on the same topic"
+                )
+            if metadata is not None and meta != old_meta:
+                raise LogFormatError(
+                    f"{where} already exists with metadata {old_meta}; got different metadata {meta}"
+                )
+            return cid
+        try:
+            schema_bytes = json.dumps(schema, separators=_JSON_SEPARATORS, allow_nan=False).encode("utf-8")
+        except (TypeError, ValueError) as e:
+            raise LogFormatError(f"{where}: schema {schema_name!r} is not JSON-serialisable: {e}") from e
+        key = (schema_name, schema_bytes)
+        sid = self._schemas.get(key)
+        if sid is None:
+            sid = self._writer.register_schema(
+                name=schema_name, encoding=SchemaEncoding.JSONSchema, data=schema_bytes
+            )
+            self._schemas[key] = sid
+        cid = self._writer.register_channel(
+            topic=topic, message_encoding=MessageEncoding.JSON, schema_id=sid, metadata=meta
+        )
+        self._channels[topic] = (cid, schema_name, json.loads(schema_bytes), meta)
+        self._sequence[topic] = 0
+        self._message_counts[topic] = 0
+        self._nonfinite_counts[topic] = 0
+        return cid
+
+    def _encode(self, topic: str, message: dict) -> tuple[bytes, int]:
+        """Compact JSON of ``message`` and the number of non-finite floats nulled."""
+        try:
+            return json.dumps(message, separators=_JSON_SEPARATORS, allow_nan=False).encode("utf-8"), 0
+        except (TypeError, ValueError):
+            pass  # non-finite floats or numpy types: take the slow path
+        counter = [0]
+        try:
+            clean = _sanitize(message, counter)
+            data = json.dumps(clean, separators=_JSON_SEPARATORS, allow_nan=False).encode("utf-8")
+        except (TypeError, ValueError, RecursionError) as e:
+            raise LogFormatError(
+                f"{self._path}: topic {topic!r}: message cannot be encoded as JSON: {e}"
+            ) from e
+        return data, counter[0]
+
+    def write(
+        self,
+        topic: str,
+        message: dict,
+        *,
+        log_time_ns: int,
+        publish_time_ns: int | None = None,
+    ) -> None:
+        """Write one message as compact JSON.
+
+        Parameters
+        ----------
+        topic : str
+            A topic added with :meth:`add_channel`.
+        message : dict
+            JSON object. Non-finite floats (also nested) are written as ``null`` and counted in
+            :attr:`nonfinite_counts`; numpy arrays and scalars are converted; tuples become lists.
+        log_time_ns : int
+            Receive time, integer nanoseconds >= 0.
+        publish_time_ns : int, optional
+            Vehicle/publisher time, integer nanoseconds >= 0; defaults to ``log_time_ns``.
+
+        Notes
+        -----
+        Sequence numbers count from 0 per channel (modulo 2**32, MCAP's field width).
+        """
+        self._check_open("write")
+        if topic not in self._channels:
+            raise LogFormatError(
+                f"{self._path}: topic {topic!r} was not added with add_channel "
+                f"(topics: {sorted(self._channels) or 'none'})"
+            )
+        where = f"{self._path}: topic {topic!r}"
+        log_t = _check_time_ns(log_time_ns, "log_time_ns", where)
+        pub_t = log_t if publish_time_ns is None else _check_time_ns(publish_time_ns, "publish_time_ns", where)
+        if not isinstance(message, dict):
+            raise LogFormatError(f"{where}: message must be a dict (JSON object), got {type(message).__name__}")
+        data, nonfinite = self._encode(topic, message)
+        cid = self._channels[topic][0]
+        seq = self._sequence[topic]
+        self._writer.add_message(
+            channel_id=cid, log_time=log_t, data=data, publish_time=pub_t, sequence=seq & 0xFFFFFFFF
+        )
+        self._sequence[topic] = seq + 1
+        self._message_counts[topic] += 1
+        self._nonfinite_counts[topic] += nonfinite
+        if self._flush_every:
+            self._since_flush += 1
+            if self._since_flush >= self._flush_every:
+                self._since_flush = 0
+                assert self._file is not None
+                self._file.flush()
+
+    def add_metadata(self, name: str, values: dict[str, str]) -> None:
+        """Add a metadata record (MCAP metadata is str -> str; values are converted with ``str()``).
+
+        Parameters
+        ----------
+        name : str
+            Record name, unique in the file. ``"livesweep.writer"`` is reserved.
+        values : dict
+            Key/value pairs; keys and values converted with ``str()``.
+        """
+        self._check_open("add metadata")
+        if not isinstance(name, str) or not name:
+            raise LogFormatError(f"{self._path}: metadata name must be a non-empty str, got {name!r}")
+        if name == WRITER_METADATA_NAME:
+            raise LogFormatError(f"{self._path}: metadata name {name!r} is reserved for the writer")
+        self._add_metadata(name, _str_map(values, f"{self._path}: metadata {name!r}"))
+
+    def _add_metadata(self, name: str, values: dict[str, str]) -> None:
+        if name in self._metadata_names:
+            raise LogFormatError(f"{self._path}: metadata record {name!r} was already added")
+        self._metadata_names.add(name)
+        self._writer.add_metadata(name, values)
+
+    def add_attachment(self, name: str, data: bytes, media_type: str, log_time_ns: int = 0) -> None:
+        """Add an attachment (e.g. the config used).
+
+        Parameters
+        ----------
+        name : str
+            Attachment name, unique in the file, e.g. ``"case.toml"``.
+        data : bytes
+            Contents.
+        media_type : str
+            E.g. ``"application/toml"`` or ``"application/json"``.
+        log_time_ns : int
+            Log time in integer nanoseconds; also used as ``create_time`` so the output does not
+            depend on the wall clock.
+        """
+        self._check_open("add an attachment")
+        if not isinstance(name, str) or not name:
+            raise LogFormatError(f"{self._path}: attachment name must be a non-empty str, got {name!r}")
+        if name in self._attachment_names:
+            raise LogFormatError(f"{self._path}: attachment {name!r} was already added")
+        if not isinstance(data, (bytes, bytearray, memoryview)):
+            raise LogFormatError(
+                f"{self._path}: attachment {name!r}: data must be bytes, got {type(data).__name__}"
+            )
+        if not isinstance(media_type, str):
+            raise LogFormatError(f"{self._path}: attachment {name!r}: media_type must be a str")
+        t = _check_time_ns(log_time_ns, "log_time_ns", f"{self._path}: attachment {name!r}")
+        self._attachment_names.add(name)
+        self._writer.add_attachment(create_time=t, log_time=t, name=name, media_type=media_type, data=bytes(data))
+
+    # -- ending ------------------------------------------------------------------------------
+
+    def close(self) -> Path:
+        """Finish the file (summary, footer), flush, fsync and (atomic mode) rename it into place.
+
+        Idempotent: a second call returns the same path.
+
+        Returns
+        -------
+        pathlib.Path
+            The finished log.
+
+        Raises
+        ------
+        LogFormatError
+            If the writer was aborted, or finishing fails (the file is then deleted).
+        """
+        if self._state == "closed":
+            return self._path
+        if self._state == "aborted":
+            raise LogFormatError(f"{self._path}: cannot close: the writer was aborted")
+        try:
+            info = {"library": self._library,
+                    "nonfinite_total": str(sum(self._nonfinite_counts.values()))}
+            for topic, n in self._nonfinite_counts.items():
+                info[f"nonfinite:{topic}"] = str(n)
+            self._add_metadata(WRITER_METADATA_NAME, info)
+            self._writer.finish()
+            assert self._file is not None
+            self._file.flush()
+            os.fsync(self._file.fileno())
+            self._file.close()
+            self._file = None
+            if self._atomic:
+                os.replace(self._file_path, self._path)
+        except OSError as e:
+            self.abort()
+            raise LogFormatError(f"cannot finish MCAP log {self._path}: {e}") from e
+        except BaseException:
+            self.abort()
+            raise
+        self._state = "closed"
+        return self._path
+
+    def abort(self) -> None:
+        """Close the file without finishing it and delete it (``<path>.partial`` in atomic mode,
+        ``path`` itself otherwise). No-op after :meth:`close` or a previous :meth:`abort`."""
+        if self._state != "open":
+            return
+        self._state = "aborted"
+        if self._file is not None:
+            try:
+                self._file.close()
+            except OSError:
+                pass
+            self._file = None
+        try:
+            os.unlink(self._file_path)
+        except FileNotFoundError:
+            pass
+
+    def __enter__(self) -> McapLogWriter:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+        return False
+
+    def __repr__(self) -> str:
+        return (f"McapLogWriter({str(self._path)!r}, state={self._state!r}, "
+                f"topics={len(self._channels)}, messages={sum(self._message_counts.values())})")
+
+
+# --------------------------------------------------------------------------------------------
+# reader
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class LogMessage:
+    """One decoded JSON message.
+
+    Attributes
+    ----------
+    topic : str
+        Channel topic.
+    log_time_ns : int
+        Receive time, integer nanoseconds.
+    publish_time_ns : int
+        Publisher (vehicle) time, integer nanoseconds.
+    sequence : int
+        Per-channel sequence number.
+    data : dict
+        The decoded JSON object (``null`` -> None).
+    """
+
+    topic: str
+    log_time_ns: int
+    publish_time_ns: int
+    sequence: int
+    data: dict
+
+
+@dataclass(frozen=True)
+class LogSummary:
+    """What a log holds.
+
+    Attributes
+    ----------
+    path : str
+        The file.
+    message_counts : dict[str, int]
+        Messages per topic (0 for channels without messages).
+    start_ns, end_ns : int
+        Smallest and largest message ``log_time`` in integer nanoseconds (0, 0 if no messages).
+    duration_s : float
+        ``(end_ns - start_ns) / 1e9`` seconds.
+    schemas : dict[str, str]
+        Topic -> schema name ("" for schemaless channels).
+    metadata : dict[str, dict[str, str]]
+        Metadata records by name.
+    attachments : tuple[str, ...]
+        Attachment names in file order.
+    complete : bool
+        False when the file was unfinished (writer killed before close) and was read by
+        streaming up to its truncated tail.
+    library : str
+        Writer library from the MCAP header ("" if unknown).
+    tail_error : str
+        For an unfinished file, why streaming stopped (e.g. ``"EndOfFile"``); "" otherwise.
+    """
+
+    path: str
+    message_counts: dict[str, int]
+    start_ns: int
+    end_ns: int
+    duration_s: float
+    schemas: dict[str, str]
+    metadata: dict[str, dict[str, str]]
+    attachments: tuple[str, ...]
+    complete: bool
+    library: str = ""
+    tail_error: str = ""
+
+
+@dataclass
+class _Scan:
+    """Everything a linear pass over the records found (for unfinished or summary-less files)."""
+
+    header: Header | None
+    schemas: dict[int, Schema]
+    channels: dict[int, Channel]
+    messages: list[Message]
+    metadata: list[Metadata]
+    attachments: list[Attachment]
+    tail_error: str
+    saw_footer: bool
+
+
+@dataclass
+class _Source:
+    path: Path
+    complete: bool
+    summary: Summary | None  # finished file with a summary section
+    scan: _Scan | None  # linear pass (unfinished file, or finished without summary)
+
+    @property
+    def channels(self) -> dict[int, Channel]:
+        if self.summary is not None:
+            return dict(self.summary.channels)
+        assert self.scan is not None
+        return self.scan.channels
+
+    @property
+    def schemas(self) -> dict[int, Schema]:
+        if self.summary is not None:
+            return dict(self.summary.schemas)
+        assert self.scan is not None
+        return self.scan.schemas
+
+    def topics(self) -> list[str]:
+        return sorted({c.topic for c in self.channels.values()})
+
+
+def _scan(path: Path) -> _Scan:
+    """Stream every record of ``path`` until the end or the first unreadable record."""
+    header = None
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    messages: list[Message] = []
+    metadata: list[Metadata] = []
+    attachments: list[Attachment] = []
+    tail_error = ""
+    saw_footer = False
+    with open(path, "rb") as f:
+        try:
+            for rec in StreamReader(f, skip_magic=False).records:
+                if isinstance(rec, Message):
+                    if rec.channel_id in channels:
+                        messages.append(rec)
+                elif isinstance(rec, Channel):
+                    channels.setdefault(rec.id, rec)
+                elif isinstance(rec, Schema):
+                    schemas.setdefault(rec.id, rec)
+                elif isinstance(rec, Metadata):
+                    metadata.append(rec)
+                elif isinstance(rec, Attachment):
+                    attachments.append(rec)
+                elif isinstance(rec, Header):
+                    header = rec
+                elif isinstance(rec, Footer):
+                    saw_footer = True
+        except Exception as e:  # noqa: BLE001 - truncated tail: EndOfFile, torn zstd/lz4 frame, ...
+            tail_error = type(e).__name__ + (f": {e}" if str(e) else "")
+    return _Scan(header, schemas, channels, messages, metadata, attachments, tail_error,
+                 saw_footer and not tail_error)
+
+
+def _open(path: str | os.PathLike[str]) -> _Source:
+    """Check ``path`` is an MCAP file and decide how to read it."""
+    p = Path(path)
+    if not p.exists():
+        raise LogFormatError(f"MCAP log {p} does not exist")
+    if not p.is_file():
+        raise LogFormatError(f"MCAP log {p} is not a regular file")
+    try:
+        size = p.stat().st_size
+        with open(p, "rb") as f:
+            head = f.read(len(_MAGIC))
+            tail = b""
+            if size >= 2 * len(_MAGIC):
+                f.seek(-len(_MAGIC), os.SEEK_END)
+                tail = f.read(len(_MAGIC))
+    except OSError as e:
+        raise LogFormatError(f"cannot read MCAP log {p}: {e.strerror or e}") from e
+    if size == 0:
+        raise LogFormatError(f"{p} is empty (0 bytes), not an MCAP file")
+    if head != _MAGIC:
+        raise LogFormatError(f"{p} is not an MCAP file (it does not start with the MCAP magic bytes)")
+    if tail == _MAGIC:
+        try:
+            with open(p, "rb") as f:
+                summary = make_reader(f).get_summary()
+        except Exception:  # noqa: BLE001 - a torn file that happens to end in the magic bytes
+            summary = None
+        if summary is not None:
+            return _Source(p, True, summary, None)
+    # unfinished (no footer), or finished without a summary section: stream the records
+    scan = _scan(p)
+    return _Source(p, scan.saw_footer, None, scan)
+
+
+def _topic_list(topics: str | Iterable[str] | None) -> list[str] | None:
+    if topics is None:
+        return None
+    if isinstance(topics, str):
+        return [topics]
+    return list(topics)
+
+
+def _decode(src: _Source, channel: Channel, msg: Message) -> LogMessage:
+    if channel.message_encoding != MessageEncoding.JSON:
+        raise LogFormatError(
+            f"{src.path}: topic {channel.topic!r} has message encoding "
+            f"{channel.message_encoding!r}, not 'json'; select JSON topics with topics=[...]"
+        )
+    try:
+        data = json.loads(msg.data)
+    except (ValueError, UnicodeDecodeError) as e:
+        raise LogFormatError(
+            f"{src.path}: topic {channel.topic!r}: message at log_time {msg.log_time} ns "
+            f"(sequence {msg.sequence}) is not valid JSON: {e}"
+        ) from e
+    if not isinstance(data, dict):
+        raise LogFormatError(
+            f"{src.path}: topic {channel.topic!r}: message at log_time {msg.log_time} ns is a JSON "
+            f"{type(data).__name__}, not an object"
+        )
+    return LogMessage(channel.topic, msg.log_time, msg.publish_time, msg.sequence, data)
+
+
+def read_messages(
+    path: str | os.PathLike[str],
+    topics: str | Iterable[str] | None = None,
+    start_ns: int | None = None,
+    end_ns: int | None = None,
+) -> Iterator[LogMessage]:
+    """Yield the JSON messages of a log in log-time order.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        MCAP file, finished or unfinished.
+    topics : str or list of str, optional
+        Only these topics (unknown topics simply match nothing). All topics when None.
+    start_ns : int, optional
+        First log time to include, integer nanoseconds (inclusive).
+    end_ns : int, optional
+        Log time to stop before, integer nanoseconds (exclusive).
+
+    Yields
+    ------
+    LogMessage
+        Ties in log time keep file order.
+
+    Raises
+    ------
+    LogFormatError
+        If the file is missing, empty or not MCAP, a selected channel is not JSON, or a
+        message is not a JSON object.
+    """
+    src = _open(path)
+    where = str(src.path)
+    if start_ns is not None:
+        start_ns = _check_time_ns(start_ns, "start_ns", where)
+    if end_ns is not None:
+        end_ns = _check_time_ns(end_ns, "end_ns", where)
+    wanted = _topic_list(topics)
+    return _iter_messages(src, wanted, start_ns, end_ns)
+
+
+def _iter_messages(
+    src: _Source, wanted: list[str] | None, start_ns: int | None, end_ns: int | None
+) -> Iterator[LogMessage]:
+    if src.scan is not None:
+        chans = src.scan.channels
+        sel = [
+            m for m in src.scan.messages
+            if (wanted is None or chans[m.channel_id].topic in wanted)
+            and (start_ns is None or m.log_time >= start_ns)
+            and (end_ns is None or m.log_time < end_ns)
+        ]
+        sel.sort(key=lambda m: m.log_time)  # stable: ties keep file order
+        for m in sel:
+            yield _decode(src, chans[m.channel_id], m)
+        return
+    try:
+        with open(src.path, "rb") as f:
+            reader = make_reader(f)
+            for _schema, channel, msg in reader.iter_messages(
+                topics=wanted, starting_at=start_ns, ending_before=end_ns, log_time_order=True
+            ):
+                yield _decode(src, channel, msg)
+    except LogFormatError:
+        raise
+    except Exception as e:  # noqa: BLE001 - McapError, OSError, zstd/lz4 errors on a damaged file
+        raise LogFormatError(f"cannot read messages from MCAP log {src.path}: {type(e).__name__}: {e}") from e
+
+
+def _metadata_dict(records: Iterable[Metadata]) -> dict[str, dict[str, str]]:
+    out: dict[str, dict[str, str]] = {}
+    for rec in records:
+        out.setdefault(rec.name, {}).update(rec.metadata)  # repeated names merge, later wins
+    return out
+
+
+def _read_metadata(src: _Source) -> dict[str, dict[str, str]]:
+    if src.scan is not None:
+        return _metadata_dict(src.scan.metadata)
+    try:
+        with open(src.path, "rb") as f:
+            return _metadata_dict(make_reader(f).iter_metadata())
+    except Exception as e:  # noqa: BLE001 - McapError, OSError, zstd/lz4 errors on a damaged file
+        raise LogFormatError(f"cannot read metadata from MCAP log {src.path}: {e}") from e
+
+
+def read_metadata(path: str | os.PathLike[str]) -> dict[str, dict[str, str]]:
+    """Metadata records of a log by name (records with the same name are merged, later wins)."""
+    return _read_metadata(_open(path))
+
+
+def read_attachments(path: str | os.PathLike[str]) -> dict[str, bytes]:
+    """Attachments of a log, name -> contents (a repeated name keeps the later attachment)."""
+    src = _open(path)
+    if src.scan is not None:
+        return {a.name: bytes(a.data) for a in src.scan.attachments}
+    try:
+        with open(src.path, "rb") as f:
+            return {a.name: bytes(a.data) for a in make_reader(f).iter_attachments()}
+    except Exception as e:  # noqa: BLE001 - McapError, OSError, zstd/lz4 errors on a damaged file
+        raise LogFormatError(f"cannot read attachments from MCAP log {src.path}: {e}") from e
+
+
+def read_summary(path: str | os.PathLike[str]) -> LogSummary:
+    """Summarise a log: counts per topic, time bounds, schemas, metadata, attachments.
+
+    For a finished file the counts and bounds come from the MCAP statistics record (the file is
+    not decoded); an unfinished file is streamed and ``complete`` is False.
+    """
+    src = _open(path)
+    chans = src.channels
+    schemas = src.schemas
+    topic_schema: dict[str, str] = {}
+    counts: dict[str, int] = {}
+    for c in chans.values():
+        s = schemas.get(c.schema_id)
+        topic_schema.setdefault(c.topic, s.name if s is not None else "")
+        counts.setdefault(c.topic, 0)
+    library = ""
+    tail_error = ""
+    if src.summary is not None:
+        stats = src.summary.statistics
+        attachments = tuple(a.name for a in src.summary.attachment_indexes)
+        try:
+            with open(src.path, "rb") as f:
+                reader = make_reader(f)
+                library = reader.get_header().library
+                if stats is not None:
+                    for cid, n in stats.channel_message_counts.items():
+                        if cid in chans:
+                            counts[chans[cid].topic] += n
+                    total = stats.message_count
+                    start, end = stats.message_start_time, stats.message_end_time
+                else:  # no statistics record: count by reading
+                    total, start, end = 0, None, None
+                    for _s, ch, m in reader.iter_messages(log_time_order=False):
+                        counts[ch.topic] += 1
+                        total += 1
+                        start = m.log_time if start is None else min(start, m.log_time)
+                        end = m.log_time if end is None else max(end, m.log_time)
+        except Exception as e:  # noqa: BLE001 - McapError, OSError, zstd/lz4 errors on a damaged file
+            raise LogFormatError(f"cannot read summary of MCAP log {src.path}: {e}") from e
+    else:
+        assert src.scan is not None
+        scan = src.scan
+        attachments = tuple(a.name for a in scan.attachments)
+        library = scan.header.library if scan.header is not None else ""
+        tail_error = "" if src.complete else (scan.tail_error or "no footer")
+        for m in scan.messages:
+            counts[scan.channels[m.channel_id].topic] += 1
+        total = len(scan.messages)
+        start = min((m.log_time for m in scan.messages), default=0)
+        end = max((m.log_time for m in scan.messages), default=0)
+    if not total:
+        start, end = 0, 0
+    return LogSummary(
+        path=str(src.path),
+        message_counts=counts,
+        start_ns=int(start),
+        end_ns=int(end),
+        duration_s=(int(end) - int(start)) / 1e9,
+        schemas=topic_schema,
+        metadata=_read_metadata(src),
+        attachments=attachments,
+        complete=src.complete,
+        library=library,
+        tail_error=tail_error,
+    )
+
+
+def _get_field(data: Any, field: str) -> tuple[bool, Any]:
+    """Look up ``field`` in a message: an exact key first, else a dotted path
+    (``"a.b.0"``: dict keys and list indices). Returns (found, value)."""
+    if isinstance(data, dict) and field in data:
+        return True, data[field]
+    cur = data
+    for part in field.split("."):
+        if isinstance(cur, dict) and part in cur:
+            cur = cur[part]
+        elif isinstance(cur, list) and part.lstrip("-").isdigit() and -len(cur) <= int(part) < len(cur):
+            cur = cur[int(part)]
+        else:
+            return False, None
+    return True, cur
+
+
+def read_fields(
+    path: str | os.PathLike[str],
+    topic: str,
+    fields: list[str],
+    time: str = "log",
+    *,
+    missing: str = "error",
+) -> dict[str, np.ndarray]:
+    """Columns of numeric fields of one topic, in log-time order.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        MCAP file, finished or unfinished.
+    topic : str
+        The channel topic.
+    fields : list of str
+        Field names; an exact key, or a dotted path into nested objects and lists
+        (``"servo.0"``). Units are whatever the messages carry.
+    time : {"log", "publish"}
+        Which MCAP time goes into ``"t_ns"``.
+    missing : {"error", "nan"}
+        What to do when a message lacks a field: raise (default) or put NaN.
+
+    Returns
+    -------
+    dict[str, numpy.ndarray]
+        One float64 array per field (``null`` -> NaN, booleans -> 0.0/1.0) and ``"t_ns"``
+        (int64 nanoseconds). Arrays are empty when the topic has no messages.
+
+    Raises
+    ------
+    LogFormatError
+        If the topic is not in the file (the message lists the topics present), a field is
+        missing (naming file, topic and field), or a value is not a number.
+    """
+    if time not in ("log", "publish"):
+        raise LogFormatError(f"{path}: time must be 'log' or 'publish', got {time!r}")
+    if missing not in ("error", "nan"):
+        raise LogFormatError(f"{path}: missing must be 'error' or 'nan', got {missing!r}")
+    if isinstance(fields, str):
+        fields = [fields]
+    fields = list(fields)
+    if "t_ns" in fields:
+        raise LogFormatError(f"{path}: 't_ns' is the time column and cannot be asked for as a field")
+    src = _open(path)
+    present = src.topics()
+    if topic not in present:
+        raise LogFormatError(f"{src.path}: topic {topic!r} is not in the log; topics present: {present}")
+    t: list[int] = []
+    cols: dict[str, list[float]] = {f: [] for f in fields}
+    for k, m in enumerate(_iter_messages(src, [topic], None, None)):
+        t.append(m.log_time_ns if time == "log" else m.publish_time_ns)
+        for f in fields:
+            found, v = _get_field(m.data, f)
+            if not found:
+                if missing == "nan":
+                    cols[f].append(math.nan)
+                    continue
+                raise LogFormatError(
+                    f"{src.path}: topic {topic!r}: field {f!r} is missing from message {k} "
+                    f"(log_time {m.log_time_ns} ns); fields present: {sorted(m.data)}"
+                )
+            if v is None:
+                cols[f].append(math.nan)
+            elif isinstance(v, (int, float)):  # bool is an int
+                cols[f].append(float(v))
+            else:
+                raise LogFormatError(
+                    f"{src.path}: topic {topic!r}: field {f!r} of message {k} "
+                    f"(log_time {m.log_time_ns} ns) is not a number: {v!r}"
+                )
+    out = {f: np.asarray(cols[f], dtype=np.float64) for f in fields}
+    out["t_ns"] = np.asarray(t, dtype=np.int64)
+    return out
+
+
+def recover(path: str | os.PathLike[str], out_path: str | os.PathLike[str]) -> int:
+    """Copy every complete record of an unfinished log into a new, finished log.
+
+    Schemas, channels, messages (bytes, times and sequence numbers unchanged), metadata and
+    attachments that were fully written before the truncation are copied in file order; the
+    header's profile and library are kept. A metadata record ``"livesweep.recover"`` notes the
+    source file, the number of messages and where reading stopped. The output is written to
+    ``<out_path>.partial`` and renamed, so it is finished or absent. Works on finished files too
+    (then it is a plain copy plus that record).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The unfinished (or finished) MCAP file.
+    out_path : str or os.PathLike
+        Where to write the finished copy; must differ from ``path``.
+
+    Returns
+    -------
+    int
+        Number of messages recovered.
+    """
+    src_p = Path(path)
+    out_p = Path(out_path)
+    _open(src_p)  # existence / magic checks with clear errors
+    if out_p.exists() and src_p.exists() and out_p.resolve() == src_p.resolve():
+        raise LogFormatError(f"recover: output {out_p} is the input file; choose another path")
+    tmp = out_p.with_name(out_p.name + ".partial")
+    try:
+        fo = open(tmp, "wb")  # noqa: SIM115
+    except OSError as e:
+        raise LogFormatError(f"cannot write recovered MCAP log {out_p}: {e.strerror or e}") from e
+    n = 0
+    stopped = "end of file"
+    try:
+        w = Writer(fo, chunk_size=256 * 1024, compression=CompressionType.ZSTD)
+        started = False
+        schema_map: dict[int, int] = {}
+        chan_map: dict[int, int] = {}
+        # Replay in file order so metadata and attachments keep their place among the messages;
+        # a schema and a channel always precede the channel's first message in the source.
+        with open(src_p, "rb") as f:
+            try:
+                for rec in StreamReader(f, skip_magic=False).records:
+                    if isinstance(rec, Header):
+                        if not started:
+                            w.start(profile=rec.profile, library=rec.library)
+                            started = True
+                        continue
+                    if not started:  # no header record: should not happen after the magic check
+                        w.start(profile="", library="livesweep")
+                        started = True
+                    if isinstance(rec, Schema):
+                        if rec.id not in schema_map:
+                            schema_map[rec.id] = w.register_schema(rec.name, rec.encoding, rec.data)
+                    elif isinstance(rec, Channel):
+                        if rec.id not in chan_map:
+                            chan_map[rec.id] = w.register_channel(
+                                rec.topic, rec.message_encoding, schema_map.get(rec.schema_id, 0),
+                                dict(rec.metadata),
+                            )
+                    elif isinstance(rec, Message):
+                        if rec.channel_id in chan_map:
+                            w.add_message(chan_map[rec.channel_id], rec.log_time, rec.data,
+                                          rec.publish_time, rec.sequence)
+                            n += 1
+                    elif isinstance(rec, Metadata):
+                        w.add_metadata(rec.name, dict(rec.metadata))
+                    elif isinstance(rec, Attachment):
+                        w.add_attachment(rec.create_time, rec.log_time, rec.name, rec.media_type,
+                                         bytes(rec.data))
+            except Exception as e:  # noqa: BLE001 - the truncated tail (EndOfFile, torn frame, ...)
+                stopped = type(e).__name__ + (f": {e}" if str(e) else "")
+        if not started:
+            w.start(profile="", library="livesweep")
+        w.add_metadata("livesweep.recover", {
+            "source": str(src_p),
+            "messages_recovered": str(n),
+            "stopped_at": stopped,
+        })
+        w.finish()
+        fo.flush()
+        os.fsync(fo.fileno())
+        fo.close()
+        os.replace(tmp, out_p)
+    except BaseException as e:
+        fo.close()
+        tmp.unlink(missing_ok=True)
+        if isinstance(e, OSError):
+            raise LogFormatError(f"cannot write recovered MCAP log {out_p}: {e}") from e
+        raise
+    return n
