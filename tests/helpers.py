@@ -1,0 +1,45 @@
+"""Reference computations for tests, written independently of livesweep's own code."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def phasors(t: np.ndarray, x: np.ndarray, omegas: np.ndarray) -> np.ndarray:
+    """Complex amplitudes of ``x`` at ``omegas`` [rad/s] by linear least squares.
+
+    Fits ``x = c0 + sum_k (a_k cos w_k t + b_k sin w_k t)`` and returns ``a_k - j b_k`` (the
+    phasor convention of ``X e^{j w t}``).
+    """
+    t = np.asarray(t, float)
+    cols = [np.ones_like(t)]
+    for w in omegas:
+        cols += [np.cos(w * t), np.sin(w * t)]
+    A = np.column_stack(cols)
+    coef, *_ = np.linalg.lstsq(A, np.asarray(x, float), rcond=None)
+    a, b = coef[1::2], coef[2::2]
+    return a - 1j * b
+
+
+class Multisine:
+    """Sum of equal-amplitude sines at integer multiples of ``2 pi / period_s`` with Schroeder phases."""
+
+    def __init__(self, omegas, amplitude=1.0, period_s=20.0):
+        self.omegas = np.asarray(omegas, float)
+        self.amplitude = amplitude
+        self.period_s = period_s
+        n = len(self.omegas)
+        self.phases = -np.pi * np.arange(n) * (np.arange(n) + 1) / n
+
+    def __call__(self, t):
+        t = np.asarray(t, float)
+        return self.amplitude * sum(np.sin(w * t + ph) for w, ph in zip(self.omegas, self.phases))
+
+
+def db(x):
+    return 20 * np.log10(np.abs(x))
+
+
+def deg_wrap(x):
+    """Angle in degrees wrapped to (-180, 180]."""
+    return np.angle(np.exp(1j * np.deg2rad(x)), deg=True)
