@@ -1,0 +1,66 @@
+"""The `livesweep` command: demo, sim to MCAP, and bad input (one line, exit 2, nothing left behind)."""
+
+import subprocess
+import sys
+
+import pytest
+
+from livesweep.telemetry.mcap_log import read_summary
+
+
+def livesweep(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "livesweep", *args], capture_output=True, text=True, cwd=cwd, timeout=300)
+
+
+def test_demo_writes_the_cruise_sweeps_and_says_what_and_where(tmp_path):
+    r = livesweep("demo", "--out", str(tmp_path / "demo"))
+    assert r.returncode == 0, r.stderr
+    path = tmp_path / "demo" / "xv15_cruise_sweeps_da.mcap"
+    assert str(path) in r.stdout
+    s = read_summary(path)
+    for topic, n in s.message_counts.items():
+        line = next(ln for ln in r.stdout.splitlines() if ln.strip().startswith(topic + " "))
+        assert int(line.split()[1]) == n
+    assert s.message_counts["/mavlink/HIGHRES_IMU"] == pytest.approx(100 * s.duration_s, rel=0.01)
+    assert f"{s.duration_s:.1f} s of flight" in r.stdout
+    assert "da sweep 2" in r.stdout
+
+
+def test_sim_writes_a_verification_log_with_an_effect(tmp_path):
+    out = tmp_path / "v.mcap"
+    r = livesweep("sim", "--manoeuvre", "doublet", "--axis", "dr", "--amplitude", "3", "--pulse", "1.5",
+                  "--effect", "scale_factor:output=r,factor=1.2", "--seed", "4", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    md = read_summary(out).metadata
+    assert md["test_point"]["manoeuvre"] == "dr doublet"
+    assert '"factor": 1.2' in md["test_point"]["effects"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--omega-min", "2", "--omega-max", "1"], "omega_min_rad_s (2) must be below omega_max_rad_s (1)"),
+    (["--duration", "5"], "duration_s = 5 s is too short for omega_min_rad_s = 0.3"),
+    (["--amplitude", "0"], "amplitude must be a finite number > 0, got 0.0"),
+    (["--model", "f16"], "unknown model 'f16'"),
+    (["--effect", "gremlin:output=p"], "unknown effect 'gremlin'"),
+    (["--effect", "sensor_skew:output=q,delay_s=0.05"], "unknown output 'q'"),
+    (["--axis", "de"], "unknown input 'de'"),
+    (["--speed", "-1", "--mavlink", "udpout:127.0.0.1:9"], "--speed must be > 0"),
+])
+def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, args, message):
+    out = tmp_path / "x.mcap"
+    r = livesweep("sim", *args, "--out", str(out))
+    assert r.returncode == 2
+    assert message in r.stderr
+    assert r.stderr.startswith("livesweep: error: ") and r.stderr.count("\n") == 1
+    assert "Traceback" not in r.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_unwritable_output_path_is_refused_before_any_work(tmp_path):
+    r = livesweep("sim", "--out", str(tmp_path / "missing" / "x.mcap"))
+    assert r.returncode == 2 and "does not exist" in r.stderr and "Traceback" not in r.stderr
+    (tmp_path / "file").write_text("x")
+    r = livesweep("demo", "--out", str(tmp_path / "file"))
+    assert r.returncode == 2 and "is not a directory" in r.stderr
+    r = livesweep("sim")
+    assert r.returncode == 2 and "--out" in r.stderr
