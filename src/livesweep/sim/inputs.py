@@ -22,7 +22,6 @@ __all__ = [
     "Step",
     "Trim",
     "PilotNoise",
-    "SIGNAL_KINDS",
 ]
 
 
@@ -314,12 +313,3 @@ class PilotNoise:
         x -= x.mean()
         return self.rms * x / np.sqrt(np.mean(x**2))
 
-
-SIGNAL_KINDS = {
-    "sweep": FrequencySweep,
-    "doublet": Doublet,
-    "3211": lambda amplitude, unit_s, **kw: Multistep(amplitude=amplitude, unit_s=unit_s, pattern=(3, 2, 1, 1), **kw),
-    "multistep": Multistep,
-    "step": Step,
-    "trim": Trim,
-}

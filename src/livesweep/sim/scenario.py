@@ -337,6 +337,20 @@ def default_pilot(model: LinearVehicleModel) -> PilotLoop | None:
     return PilotLoop(gains=(("da", "phi", 0.5), ("da", "p", 0.2), ("dr", "r", -1.0)), delay_s=0.2)
 
 
+def _standard_scenario(m, segments, effects, noise, turbulence, seed) -> Scenario:
+    """A test point with the model's default sensors, turbulence and (if unstable) pilot."""
+    return Scenario(
+        model=m,
+        segments=tuple(segments),
+        effects=tuple(effects),
+        sensors=default_sensors(m, noise),
+        turbulence=default_turbulence(m) if turbulence else None,
+        pilot=default_pilot(m),
+        seed=seed,
+        condition=m.description,
+    )
+
+
 def sweep_scenario(
     model: str | LinearVehicleModel = "xv15-cruise",
     axes: tuple[str, ...] = ("da",),
@@ -393,16 +407,7 @@ def sweep_scenario(
                     for k, other in enumerate(m.inputs) if other != axis
                 )
             segments.append(Segment(f"{axis} sweep {r + 1}", "sweep", axis, sw, off))
-    return Scenario(
-        model=m,
-        segments=tuple(segments),
-        effects=tuple(effects),
-        sensors=default_sensors(m, noise),
-        turbulence=default_turbulence(m) if turbulence else None,
-        pilot=default_pilot(m),
-        seed=seed,
-        condition=m.description,
-    )
+    return _standard_scenario(m, segments, effects, noise, turbulence, seed)
 
 
 def verification_scenario(
@@ -433,13 +438,4 @@ def verification_scenario(
         else:
             raise ConfigError(f"unknown verification manoeuvre {kind!r}; use doublet, 3211 or step")
         segments.append(Segment(f"{axis} {kind}", kind, axis, sig))
-    return Scenario(
-        model=m,
-        segments=tuple(segments),
-        effects=tuple(effects),
-        sensors=default_sensors(m, noise),
-        turbulence=default_turbulence(m) if turbulence else None,
-        pilot=default_pilot(m),
-        seed=seed,
-        condition=m.description,
-    )
+    return _standard_scenario(m, segments, effects, noise, turbulence, seed)
