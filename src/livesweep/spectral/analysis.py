@@ -1,0 +1,164 @@
+"""From uniformly sampled signals to frequency-response sets (the FRESPID/MISOSA/COMPOSITE chain).
+
+``analyze`` checks the settings against the record, computes one spectral matrix per window
+length (overlapped Hann windows, chirp-z on a dense grid), then composites them onto a common
+log-spaced grid: ordinary (SISO) responses for every pair and, with more than one input,
+MISO-conditioned responses with partial and multiple coherences.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from livesweep.errors import ConfigError
+from livesweep.spectral.composite import composite_output_miso, composite_pair
+from livesweep.spectral.miso import input_coherence_max
+from livesweep.spectral.composite import interpolate_window
+from livesweep.spectral.response import FrequencyResponseSet
+from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW, WindowSpectra, window_spectra
+from livesweep.spectral.windows import default_windows_s
+
+__all__ = ["SpectralAnalysis", "analyze", "check_settings"]
+
+
+@dataclass(frozen=True)
+class SpectralAnalysis:
+    """Result of :func:`analyze`.
+
+    Attributes
+    ----------
+    siso : FrequencyResponseSet
+        Ordinary responses of every output to every input (not conditioned).
+    miso : FrequencyResponseSet or None
+        Conditioned responses (more than one input), else None.
+    windows : tuple of WindowSpectra
+        The per-window spectral matrices the composite was made from.
+    """
+
+    siso: FrequencyResponseSet
+    miso: FrequencyResponseSet | None
+    windows: tuple
+
+    @property
+    def best(self) -> FrequencyResponseSet:
+        """The conditioned set when there is one, else the ordinary set."""
+        return self.miso if self.miso is not None else self.siso
+
+
+def check_settings(values: np.ndarray, names, sample_rate_hz: float, inputs, outputs, band_rad_s,
+                   windows_s, valid) -> tuple[float, ...]:
+    """Validate band, windows and signals against the record; return the window lengths [s]."""
+    names = list(names)
+    for n in list(inputs) + list(outputs):
+        if n not in names:
+            raise ConfigError(f"signal {n!r} is not in the record (signals: {', '.join(names)})")
+    if not inputs or not outputs:
+        raise ConfigError("spectral analysis needs at least one input and one output")
+    lo, hi = float(band_rad_s[0]), float(band_rad_s[1])
+    nyq = math.pi * sample_rate_hz
+    if not (0 < lo < hi):
+        raise ConfigError(f"band_rad_s = [{lo:g}, {hi:g}] must satisfy 0 < low < high")
+    if hi >= nyq:
+        raise ConfigError(f"band_rad_s upper end {hi:g} rad/s is at or above Nyquist ({nyq:.1f} rad/s at {sample_rate_hz:g} Hz)")
+    record_s = values.shape[1] / sample_rate_hz
+    ok = np.ones(values.shape[1], bool) if valid is None else np.asarray(valid, bool)
+    for k, n in enumerate(names):
+        if n not in inputs and n not in outputs:
+            continue
+        x = values[k][ok]
+        if x.size == 0 or not np.any(np.isfinite(x)):
+            raise ConfigError(f"signal {n!r} has no valid samples")
+        if np.nanstd(x) == 0:
+            raise ConfigError(f"signal {n!r} is constant ({x[0]:g}): nothing to identify from")
+    if windows_s is None:
+        windows_s = default_windows_s(record_s, lo, hi, min_periods=MIN_PERIODS_PER_WINDOW)
+    windows_s = tuple(float(w) for w in windows_s)
+    for w in windows_s:
+        if w > record_s / 2:
+            raise ConfigError(f"window {w:g} s is longer than half the record ({record_s / 2:.1f} s)")
+        if w * sample_rate_hz < 8:
+            raise ConfigError(f"window {w:g} s holds fewer than 8 samples at {sample_rate_hz:g} Hz")
+    if MIN_PERIODS_PER_WINDOW * 2 * math.pi / max(windows_s) > hi:
+        raise ConfigError(f"the longest window ({max(windows_s):g} s) cannot resolve any of band_rad_s = [{lo:g}, {hi:g}]")
+    return windows_s
+
+
+def analyze(values: np.ndarray, names, sample_rate_hz: float, inputs, outputs, band_rad_s, *,
+            valid: np.ndarray | None = None, windows_s=None, overlap: float = 0.8, n_freq: int = 150,
+            max_input_coherence: float = 0.5) -> SpectralAnalysis:
+    """Frequency responses of ``outputs`` to ``inputs`` from a uniformly sampled record.
+
+    Parameters
+    ----------
+    values : ndarray, shape (n_signals, n_samples)
+    names : sequence of str
+        Signal names, in ``values`` order.
+    sample_rate_hz : float
+    inputs, outputs : sequence of str
+    band_rad_s : (float, float)
+        Band of the composite grid [rad/s].
+    valid : ndarray of bool, shape (n_samples,), optional
+        False in data gaps; windows touching a gap are excluded.
+    windows_s : sequence of float, optional
+        Window lengths [s]; default five, geometrically spaced (method.md §4.4).
+    overlap : float
+        Window overlap (default 0.8).
+    n_freq : int
+        Points of the common log-spaced grid.
+    max_input_coherence : float
+        Input cross-coherence above which a frequency is flagged ill-conditioned.
+
+    Returns
+    -------
+    SpectralAnalysis
+    """
+    values = np.atleast_2d(np.asarray(values, float))
+    names = tuple(names)
+    windows_s = check_settings(values, names, sample_rate_hz, inputs, outputs, band_rad_s, windows_s, valid)
+    used = [n for n in names if n in inputs or n in outputs]
+    rows = [names.index(n) for n in used]
+    x = values[rows]
+    windows = tuple(window_spectra(x, used, sample_rate_hz, w, band_rad_s, valid=valid, overlap=overlap)
+                    for w in windows_s)
+    omega = np.geomspace(band_rad_s[0], band_rad_s[1], n_freq)
+    idx_in = [used.index(n) for n in inputs]
+    idx_out = [used.index(n) for n in outputs]
+    shape = (len(outputs), len(inputs), omega.size)
+    H, coh, eps = np.empty(shape, complex), np.empty(shape), np.empty(shape)
+    for a, o in enumerate(idx_out):
+        for b, i in enumerate(idx_in):
+            H[a, b], coh[a, b], eps[a, b] = composite_pair(list(windows), omega, i, o)
+    settings = {
+        "windows_s": list(windows_s), "overlap": overlap, "sample_rate_hz": sample_rate_hz,
+        "band_rad_s": [float(band_rad_s[0]), float(band_rad_s[1])], "n_freq": n_freq,
+        "taper": "hann (periodic)", "transform": "chirp-z, grid 2x window resolution",
+        "composite": "inverse-variance weighted spectra (livesweep.spectral.composite)",
+        "averages": [{"window_s": w.window_s, "segments": w.n_segments, "n_eff": round(w.n_eff, 2),
+                      "excluded_for_gaps": w.n_excluded} for w in windows],
+    }
+    ill_in = _input_coherence_composite(windows, omega, idx_in) > max_input_coherence if len(idx_in) > 1 else None
+    siso = FrequencyResponseSet(tuple(outputs), tuple(inputs), omega, H, coh, eps, False, None, ill_in, settings)
+    miso = None
+    if len(idx_in) > 1:
+        Hm, pc, mc, em = np.empty(shape, complex), np.empty(shape), np.empty((len(outputs), omega.size)), np.empty(shape)
+        ill = np.zeros(omega.size, bool)
+        for a, o in enumerate(idx_out):
+            Hm[a], pc[a], mc[a], em[a], ill_o = composite_output_miso(list(windows), omega, idx_in, o, max_input_coherence)
+            ill |= ill_o
+        miso = FrequencyResponseSet(tuple(outputs), tuple(inputs), omega, Hm, pc, em, True, mc, ill,
+                                    {**settings, "max_input_coherence": max_input_coherence})
+    return SpectralAnalysis(siso, miso, windows)
+
+
+def _input_coherence_composite(windows, omega, idx_in):
+    """Input cross-coherence on the common grid, from the shortest window able to resolve each point
+    (the most averages, so the least bias upward)."""
+    out = np.zeros(omega.size)
+    for ws in sorted(windows, key=lambda w: -w.window_s):  # the shortest usable window (most averages) wins
+        G, usable = interpolate_window(ws, omega, idx_in)
+        c = input_coherence_max(G, list(range(len(idx_in))))
+        out = np.where(usable, c, out)
+    return out

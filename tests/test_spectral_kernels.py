@@ -1,0 +1,136 @@
+"""Spectral kernels against scipy on identical settings, and Welch/random-error theory."""
+
+import numpy as np
+import pytest
+from scipy import signal as sps
+
+from livesweep.errors import ConfigError
+from livesweep.spectral.response import FrequencyResponse, FrequencyResponseSet, broken_loop
+from livesweep.spectral.spectra import coherence, random_error, spectral_matrix
+from livesweep.spectral.transform import segment_transforms
+from livesweep.spectral.windows import default_windows_s, effective_averages, hann, plan_segments
+
+
+def test_single_window_spectra_equal_scipy_csd_and_coherence():
+    rng = np.random.default_rng(0)
+    fs, n, N = 50.0, 6000, 512
+    x = rng.standard_normal(n)
+    y = sps.lfilter([0.2, 0.1], [1, -0.7], x) + 0.3 * rng.standard_normal(n)
+    hop = int(round(0.2 * N))
+    kw = dict(fs=fs, window="hann", nperseg=N, noverlap=N - hop, detrend="constant")
+    f, Pxy = sps.csd(x, y, **kw)
+    _, Pxx = sps.welch(x, **kw)
+    _, Cxy = sps.coherence(x, y, **kw)
+    k = np.arange(3, 200)                       # bins away from DC
+    omega = 2 * np.pi * f[k]
+    plan = plan_segments(n, N, 0.8)
+    X = segment_transforms(np.vstack([x, y]), plan.starts, N, hann(N), omega, fs)
+    G = spectral_matrix(X, hann(N), fs)
+    np.testing.assert_allclose(G[0, 1], Pxy[k], rtol=1e-9)
+    np.testing.assert_allclose(G[0, 0].real, Pxx[k], rtol=1e-9)
+    np.testing.assert_allclose(coherence(G, 0, 1), Cxy[k], rtol=1e-9)
+    np.testing.assert_allclose(G[0, 1] / G[0, 0], Pxy[k] / Pxx[k], rtol=1e-9)
+
+
+def test_czt_off_bin_equals_direct_dft():
+    rng = np.random.default_rng(1)
+    x = rng.standard_normal((1, 700))
+    omega = np.linspace(0.37, 11.3, 97)
+    fs = 50.0
+    X = segment_transforms(x, np.array([0, 100]), 400, hann(400), omega, fs)
+    n = np.arange(400)
+    seg = x[0, 100:500] - x[0, 100:500].mean()
+    direct = (hann(400) * seg) @ np.exp(-1j * np.outer(n / fs, omega))
+    np.testing.assert_allclose(X[0, 1], direct, rtol=1e-9, atol=1e-9)
+
+
+def test_effective_averages_match_the_closed_form_for_hann_at_50_percent():
+    N, K = 256, 12
+    rho = (1 / 6) ** 2   # periodic Hann, shift N/2: overlap sum of w w' is N/16, sum of w^2 is 3N/8
+    expected = K / (1 + 2 * (1 - 1 / K) * rho)
+    assert effective_averages(K, N, N // 2) == pytest.approx(expected, rel=1e-9)
+    assert effective_averages(K, N, N) == pytest.approx(K)
+
+
+def test_random_error_formula_and_its_monte_carlo_scatter():
+    # measured gamma^2 = 0.6 with 5 averages: the true coherence g satisfies g + (1-g)^2/5 = 0.6
+    # (bias, method.md §2.5) -> g = 0.5615; eps = sqrt(1-g) / (sqrt(g) sqrt(2*5)) = 0.2794
+    g = 1 - 2.5 * (1 - np.sqrt(1 - 4 * 0.4 / 5))
+    assert g + (1 - g) ** 2 / 5 == pytest.approx(0.6)
+    assert random_error(np.array([0.6]), 5.0)[0] == pytest.approx(np.sqrt(1 - g) / (np.sqrt(g) * np.sqrt(10)))
+    assert random_error(np.array([0.6]), 5.0)[0] == pytest.approx(0.2794, abs=1e-4)
+    # Monte Carlo: the scatter of |H| over noisy realisations agrees with eps_r within 25 %
+    rng = np.random.default_rng(2)
+    fs, n, N = 50.0, 5000, 500
+    plan = plan_segments(n, N, 0.8)
+    n_eff = effective_averages(plan.n_segments, N, plan.hop)
+    omega = np.array([2.0, 5.0, 8.0])
+    mags, cohs = [], []
+    for _ in range(300):
+        x = rng.standard_normal(n)
+        y = 0.5 * x + 0.8 * rng.standard_normal(n)
+        X = segment_transforms(np.vstack([x, y]), plan.starts, N, hann(N), omega, fs)
+        G = spectral_matrix(X, hann(N), fs)
+        mags.append(np.abs(G[0, 1] / G[0, 0]))
+        cohs.append(coherence(G, 0, 1))
+    scatter = np.std(mags, axis=0) / 0.5
+    predicted = random_error(np.mean(cohs, axis=0), n_eff)
+    np.testing.assert_allclose(scatter, predicted, rtol=0.25)
+
+
+def test_segment_plan_excludes_windows_touching_gaps():
+    valid = np.ones(1000, bool)
+    valid[500:510] = False
+    plan = plan_segments(1000, 100, 0.8, valid)
+    assert plan.hop == 20
+    assert all(s + 100 <= 500 or s >= 510 for s in plan.starts)
+    assert plan.n_excluded == len(range(0, 901, 20)) - plan.n_segments == 5   # starts 420..500 touch 500-509
+
+
+def test_default_windows_follow_the_method_and_refuse_short_records():
+    w = default_windows_s(400.0, 0.3, 20.0)
+    assert len(w) == 5 and w[0] == pytest.approx(20 * 2 * np.pi / 20.0, rel=1e-3)
+    assert w[-1] == pytest.approx(200.0)                         # T_win,max = T_rec / 2
+    with pytest.raises(ConfigError, match="needs windows of 62.8 s"):  # three periods of 0.3 rad/s
+        default_windows_s(60.0, 0.3, 20.0)
+
+
+def _analytic(omega, f):
+    return FrequencyResponse("y", "x", omega, f(1j * omega), np.full(omega.size, 0.9), np.full(omega.size, 0.1))
+
+
+def test_frequency_response_arithmetic():
+    w = np.logspace(-1, 1, 50)
+    a = FrequencyResponse("b", "a", w, 1 / (1j * w + 1), np.full(50, 0.9), np.full(50, 0.1))
+    b = FrequencyResponse("c", "b", w, 2 / (1j * w + 3), np.full(50, 0.8), np.full(50, 0.2))
+    ab = b * a
+    assert (ab.output, ab.input) == ("c", "a")
+    np.testing.assert_allclose(ab.H, 2 / ((1j * w + 1) * (1j * w + 3)))
+    np.testing.assert_allclose(ab.random_error, np.sqrt(0.1**2 + 0.2**2))
+    np.testing.assert_allclose(ab.coherence, 0.72)
+    np.testing.assert_allclose(a.inverse().H, 1j * w + 1)
+    # broken loop from closed-loop data with a common reference: L = (y_fb/r)/(u/r)
+    L = 5 * np.exp(-0.1j * w) / (1j * w * (0.2j * w + 1))
+    yfb_r = FrequencyResponse("yfb", "r", w, L / (1 + L), np.ones(50), np.zeros(50))
+    u_r = FrequencyResponse("u", "r", w, 1 / (1 + L), np.ones(50), np.zeros(50))
+    np.testing.assert_allclose(broken_loop(yfb_r, u_r).H, L, rtol=1e-12)
+    np.testing.assert_allclose(broken_loop(yfb_r, u_r, negative_feedback=False).H, -L, rtol=1e-12)
+    with pytest.raises(ConfigError, match="different frequency grids"):
+        a * FrequencyResponse("b", "a", w * 2, a.H, a.coherence, a.random_error)
+
+
+def test_frequency_response_set_round_trips_through_its_dict():
+    rng = np.random.default_rng(3)
+    w = np.geomspace(0.3, 20, 40)
+    H = rng.standard_normal((2, 2, 40)) + 1j * rng.standard_normal((2, 2, 40))
+    err = rng.uniform(0.01, 0.3, (2, 2, 40))
+    err[0, 0, 0] = np.inf
+    s = FrequencyResponseSet(("p", "r"), ("da", "dr"), w, H, rng.uniform(0, 1, (2, 2, 40)), err, True,
+                             rng.uniform(0, 1, (2, 40)), rng.uniform(0, 1, 40) > 0.5, {"windows_s": [7.0, 20.0]})
+    back = FrequencyResponseSet.from_dict(s.to_dict())
+    for name in ("omega", "H", "coherence", "random_error", "multiple_coherence", "ill_conditioned"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(s, name))
+    assert back.settings == s.settings and back.conditioned
+    one = FrequencyResponse.from_dict(s.pair("r", "da").to_dict())
+    np.testing.assert_allclose(one.H, s.H[1, 0], rtol=1e-12)
+    np.testing.assert_allclose(one.magnitude_db, 20 * np.log10(np.abs(s.H[1, 0])))
