@@ -1,0 +1,468 @@
+"""Case files and channel maps (TOML, DESIGN.md §4.2): load and validate.
+
+A *case file* names the records to identify from (``[[identify]]``, concatenated in order), the
+records to verify against (``[[verify]]``), where each signal lives in the logs (``[signals]``),
+the spectral settings (``[spectral]``) and, for later stages, the models (``[transfer_functions]``,
+``[state_space]``, ...). A *channel map* is a file with only ``[signals]`` and an optional
+``[spectral]`` table (what the live monitor needs).
+
+Every problem raises :class:`~livesweep.errors.ConfigError` with a one-line message that names
+the file, the key path (``signals.p.scale``, ``identify[1].start_s``; array indices count from 0)
+and the offending value. Nothing is silently dropped: an unknown key in a table parsed here is an
+error. The tables of later stages (``consistency``, ``transfer_functions``, ``state_space``,
+``verification``, ``residual``) are kept raw in :attr:`Case.tables` and validated by the stages
+that use them.
+
+Units: times in seconds on the signals' stamp clock (vehicle time), frequencies in rad/s, sample
+rates in Hz.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from livesweep.errors import ConfigError
+
+__all__ = [
+    "SignalSpec",
+    "RecordSpec",
+    "SpectralSettings",
+    "Case",
+    "load_case",
+    "load_channel_map",
+    "CASE_KEYS",
+    "RAW_TABLE_KEYS",
+]
+
+#: Top-level tables the stages after frequency-response estimation parse themselves.
+RAW_TABLE_KEYS = ("consistency", "transfer_functions", "state_space", "verification", "residual")
+#: Every top-level key a case file may hold.
+CASE_KEYS = ("case", "identify", "verify", "signals", "spectral") + RAW_TABLE_KEYS
+
+_CASE_TABLE_KEYS = ("name", "aircraft", "condition")
+_RECORD_KEYS = ("log", "label", "start_s", "end_s")
+_SIGNAL_KEYS = ("topic", "field", "stamp", "stamp_scale", "scale", "offset", "units")
+_SPECTRAL_KEYS = ("inputs", "outputs", "band_rad_s", "sample_rate_hz", "windows_s", "overlap", "n_freq")
+_MAX_OVERLAP = 0.95
+
+
+# --------------------------------------------------------------------------------------------
+# results
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SignalSpec:
+    """Where a named signal lives in a log and how to turn the raw field into engineering units.
+
+    Attributes
+    ----------
+    name : str
+        The signal's name in the case (``"p"``, ``"da"``).
+    topic : str
+        MCAP channel topic, e.g. ``"/mavlink/HIGHRES_IMU"``.
+    field : str
+        Field of the JSON message (exact key or dotted path, ``"gyro.x"``, ``"servo.0"``).
+    stamp : str or None
+        Field holding the vehicle time of the sample; None to use the MCAP ``log_time``
+        (receive time, ns).
+    stamp_scale : float
+        Seconds per stamp unit (``1e-6`` for ``time_usec``). 1.0 when ``stamp`` is None.
+    scale, offset : float
+        ``value = scale * raw + offset`` in ``units``.
+    units : str
+        Units of the scaled value (free text, e.g. ``"deg/s"``).
+    """
+
+    name: str
+    topic: str
+    field: str
+    stamp: str | None = None
+    stamp_scale: float = 1.0
+    scale: float = 1.0
+    offset: float = 0.0
+    units: str = ""
+
+
+@dataclass(frozen=True)
+class RecordSpec:
+    """One log (or a time slice of it) to read.
+
+    Attributes
+    ----------
+    log : pathlib.Path
+        The MCAP file, resolved relative to the case file.
+    label : str
+        Words for reports (``"aileron sweeps x2"``).
+    start_s, end_s : float or None
+        Slice ``[start_s, end_s)`` on the signals' stamp clock [s]; None for the start or end of
+        the log.
+    """
+
+    log: Path
+    label: str = ""
+    start_s: float | None = None
+    end_s: float | None = None
+
+
+@dataclass(frozen=True)
+class SpectralSettings:
+    """Spectral settings of a case or channel map.
+
+    Attributes
+    ----------
+    inputs, outputs : tuple of str
+        Signal names (disjoint; every name is in ``[signals]``).
+    band_rad_s : (float, float)
+        Frequency band of interest [rad/s], ``0 < lo < hi < pi * sample_rate_hz``.
+    sample_rate_hz : float
+        Uniform resampling rate [Hz].
+    windows_s : tuple of float or None
+        Window lengths for the composite [s]; None lets the spectral stage choose.
+    overlap : float
+        Window overlap fraction in ``[0, 0.95]``.
+    n_freq : int
+        Number of frequency points over the band.
+    """
+
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    band_rad_s: tuple[float, float]
+    sample_rate_hz: float
+    windows_s: tuple[float, ...] | None = None
+    overlap: float = 0.8
+    n_freq: int = 150
+
+
+@dataclass(frozen=True)
+class Case:
+    """A validated case file.
+
+    Attributes
+    ----------
+    path : pathlib.Path
+        The case file (resolved).
+    name, aircraft, condition : str
+        From ``[case]``.
+    identify, verify : tuple of RecordSpec
+        Records to identify from (concatenated in order) and to verify against.
+    signals : dict[str, SignalSpec]
+        From ``[signals]``, in file order.
+    spectral : SpectralSettings or None
+        From ``[spectral]``; None when the table is absent.
+    tables : dict
+        The raw TOML tables of later stages (any of ``consistency``, ``transfer_functions``,
+        ``state_space``, ``verification``, ``residual`` that are present), unparsed.
+    """
+
+    path: Path
+    name: str
+    aircraft: str
+    condition: str
+    identify: tuple[RecordSpec, ...]
+    verify: tuple[RecordSpec, ...]
+    signals: dict[str, SignalSpec]
+    spectral: SpectralSettings | None
+    tables: dict
+
+
+# --------------------------------------------------------------------------------------------
+# small validators: each names the file, the key path and the value
+# --------------------------------------------------------------------------------------------
+
+
+class _Ctx:
+    """The file being validated, for error messages."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def error(self, key: str, problem: str, value: Any = ...) -> ConfigError:
+        got = "" if value is ... else f", got {value!r}"
+        return ConfigError(f"{self.path}: {key}: {problem}{got}")
+
+
+def _type_name(value: Any) -> str:
+    return {bool: "boolean", int: "integer", float: "float", str: "string",
+            list: "array", dict: "table"}.get(type(value), type(value).__name__)
+
+
+def _check_keys(ctx: _Ctx, table: Mapping[str, Any], known: tuple[str, ...], where: str) -> None:
+    """Raise on the first key of ``table`` not in ``known``."""
+    for key in table:
+        if key not in known:
+            path = f"{where}.{key}" if where else key
+            raise ConfigError(
+                f"{ctx.path}: {path}: unknown key {key!r}; known keys{' in ' + where if where else ''}: "
+                f"{', '.join(known)}"
+            )
+
+
+def _table(ctx: _Ctx, value: Any, key: str) -> dict[str, Any]:
+    if not isinstance(value, dict):
+        raise ctx.error(key, f"must be a table, not {_type_name(value)}", value)
+    return value
+
+
+def _string(ctx: _Ctx, value: Any, key: str, *, nonempty: bool = True) -> str:
+    if not isinstance(value, str):
+        raise ctx.error(key, f"must be a string, not {_type_name(value)}", value)
+    if nonempty and not value.strip():
+        raise ctx.error(key, "must be a non-empty string", value)
+    return value
+
+
+def _number(ctx: _Ctx, value: Any, key: str) -> float:
+    """A finite TOML integer or float (booleans are not numbers here)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ctx.error(key, f"must be a number, not {_type_name(value)}", value)
+    v = float(value)
+    if not math.isfinite(v):
+        raise ctx.error(key, "must be a finite number", value)
+    return v
+
+
+def _positive(ctx: _Ctx, value: Any, key: str) -> float:
+    v = _number(ctx, value, key)
+    if v <= 0:
+        raise ctx.error(key, "must be > 0", value)
+    return v
+
+
+def _string_list(ctx: _Ctx, value: Any, key: str) -> tuple[str, ...]:
+    if not isinstance(value, list):
+        raise ctx.error(key, f"must be an array of strings, not {_type_name(value)}", value)
+    if not value:
+        raise ctx.error(key, "must name at least one signal", value)
+    out = tuple(_string(ctx, v, f"{key}[{i}]") for i, v in enumerate(value))
+    for i, v in enumerate(out):
+        if v in out[:i]:
+            raise ctx.error(f"{key}[{i}]", "is listed twice", v)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# tables
+# --------------------------------------------------------------------------------------------
+
+
+def _parse_signal(ctx: _Ctx, name: str, raw: Any) -> SignalSpec:
+    where = f"signals.{name}"
+    t = _table(ctx, raw, where)
+    _check_keys(ctx, t, _SIGNAL_KEYS, where)
+    for req in ("topic", "field"):
+        if req not in t:
+            raise ctx.error(where, f"missing required key {req!r} (a signal needs topic and field)")
+    stamp = _string(ctx, t["stamp"], f"{where}.stamp") if "stamp" in t else None
+    if "stamp_scale" in t and stamp is None:
+        raise ctx.error(f"{where}.stamp_scale", "is given without 'stamp' (log_time is already in ns -> s)",
+                        t["stamp_scale"])
+    scale = _number(ctx, t.get("scale", 1.0), f"{where}.scale")
+    if scale == 0.0:
+        raise ctx.error(f"{where}.scale", "must not be 0 (the signal would be constant)", t["scale"])
+    return SignalSpec(
+        name=name,
+        topic=_string(ctx, t["topic"], f"{where}.topic"),
+        field=_string(ctx, t["field"], f"{where}.field"),
+        stamp=stamp,
+        stamp_scale=_positive(ctx, t["stamp_scale"], f"{where}.stamp_scale") if "stamp_scale" in t else 1.0,
+        scale=scale,
+        offset=_number(ctx, t.get("offset", 0.0), f"{where}.offset"),
+        units=_string(ctx, t["units"], f"{where}.units", nonempty=False) if "units" in t else "",
+    )
+
+
+def _parse_signals(ctx: _Ctx, raw: Any) -> dict[str, SignalSpec]:
+    t = _table(ctx, raw, "signals")
+    if not t:
+        raise ctx.error("signals", "must define at least one signal ([signals.NAME] with topic and field)")
+    out: dict[str, SignalSpec] = {}
+    for name, spec in t.items():
+        if not name.strip():
+            raise ctx.error("signals", "a signal name must not be empty", name)
+        out[name] = _parse_signal(ctx, name, spec)
+    return out
+
+
+def _parse_spectral(ctx: _Ctx, raw: Any, signals: Mapping[str, SignalSpec]) -> SpectralSettings:
+    t = _table(ctx, raw, "spectral")
+    _check_keys(ctx, t, _SPECTRAL_KEYS, "spectral")
+    for req in ("inputs", "outputs", "band_rad_s", "sample_rate_hz"):
+        if req not in t:
+            raise ctx.error("spectral", f"missing required key {req!r} "
+                            "(spectral needs inputs, outputs, band_rad_s and sample_rate_hz)")
+    inputs = _string_list(ctx, t["inputs"], "spectral.inputs")
+    outputs = _string_list(ctx, t["outputs"], "spectral.outputs")
+    for key, names in (("spectral.inputs", inputs), ("spectral.outputs", outputs)):
+        for i, n in enumerate(names):
+            if n not in signals:
+                raise ctx.error(f"{key}[{i}]", f"names no signal in [signals] (defined: {', '.join(signals)})", n)
+    for i, n in enumerate(inputs):
+        if n in outputs:
+            raise ctx.error(f"spectral.inputs[{i}]", "is also listed in spectral.outputs; "
+                            "a signal is an input or an output, not both", n)
+    fs = _positive(ctx, t["sample_rate_hz"], "spectral.sample_rate_hz")
+    band = t["band_rad_s"]
+    if not isinstance(band, list) or len(band) != 2:
+        raise ctx.error("spectral.band_rad_s", "must be an array [lo, hi] of two numbers in rad/s", band)
+    lo = _number(ctx, band[0], "spectral.band_rad_s[0]")
+    hi = _number(ctx, band[1], "spectral.band_rad_s[1]")
+    if lo <= 0:
+        raise ctx.error("spectral.band_rad_s", "lower bound must be > 0 rad/s", band)
+    if lo >= hi:
+        raise ctx.error("spectral.band_rad_s", "lower bound must be below the upper bound", band)
+    nyquist = math.pi * fs
+    if hi >= nyquist:
+        raise ctx.error("spectral.band_rad_s", f"upper bound must be below the Nyquist frequency "
+                        f"pi * sample_rate_hz = {nyquist:.6g} rad/s", band)
+    windows: tuple[float, ...] | None = None
+    if "windows_s" in t:
+        w = t["windows_s"]
+        if not isinstance(w, list) or not w:
+            raise ctx.error("spectral.windows_s", "must be a non-empty array of window lengths in s", w)
+        windows = tuple(_positive(ctx, v, f"spectral.windows_s[{i}]") for i, v in enumerate(w))
+    overlap = _number(ctx, t.get("overlap", 0.8), "spectral.overlap")
+    if not 0.0 <= overlap <= _MAX_OVERLAP:
+        raise ctx.error("spectral.overlap", f"must be in [0, {_MAX_OVERLAP}]", t["overlap"])
+    n_freq = t.get("n_freq", 150)
+    if isinstance(n_freq, bool) or not isinstance(n_freq, int) or n_freq < 2:
+        raise ctx.error("spectral.n_freq", "must be an integer >= 2", n_freq)
+    return SpectralSettings(inputs=inputs, outputs=outputs, band_rad_s=(lo, hi), sample_rate_hz=fs,
+                            windows_s=windows, overlap=overlap, n_freq=n_freq)
+
+
+def _parse_record(ctx: _Ctx, raw: Any, where: str, base: Path) -> RecordSpec:
+    t = _table(ctx, raw, where)
+    _check_keys(ctx, t, _RECORD_KEYS, where)
+    if "log" not in t:
+        raise ctx.error(where, "missing required key 'log' (the MCAP file, relative to the case file)")
+    log_text = _string(ctx, t["log"], f"{where}.log")
+    log = (base / Path(log_text).expanduser()).resolve()
+    if not log.is_file():
+        what = "is a directory, not a log file" if log.is_dir() else "does not exist"
+        raise ConfigError(f"{ctx.path}: {where}.log: {log} {what} (from log = {log_text!r})")
+    start = _number(ctx, t["start_s"], f"{where}.start_s") if "start_s" in t else None
+    end = _number(ctx, t["end_s"], f"{where}.end_s") if "end_s" in t else None
+    if start is not None and end is not None and start >= end:
+        raise ctx.error(f"{where}.start_s", f"must be before end_s = {t['end_s']!r}", t["start_s"])
+    label = _string(ctx, t["label"], f"{where}.label", nonempty=False) if "label" in t else ""
+    return RecordSpec(log=log, label=label, start_s=start, end_s=end)
+
+
+def _parse_records(ctx: _Ctx, raw: Any, key: str, base: Path, *, required: bool) -> tuple[RecordSpec, ...]:
+    if raw is None:
+        if required:
+            raise ctx.error(key, f"missing: a case needs at least one [[{key}]] record")
+        return ()
+    if not isinstance(raw, list):
+        raise ctx.error(key, f"must be an array of tables ([[{key}]]), not {_type_name(raw)}", raw)
+    if required and not raw:
+        raise ctx.error(key, f"a case needs at least one [[{key}]] record", raw)
+    return tuple(_parse_record(ctx, r, f"{key}[{i}]", base) for i, r in enumerate(raw))
+
+
+def _read_toml(path: str | os.PathLike[str]) -> tuple[_Ctx, dict[str, Any]]:
+    p = Path(path).resolve()
+    if not p.is_file():
+        what = "is a directory" if p.is_dir() else "does not exist"
+        raise ConfigError(f"config file {p} {what}")
+    try:
+        text = p.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{p}: not UTF-8 text (byte {e.start}): TOML files must be UTF-8") from e
+    except OSError as e:
+        raise ConfigError(f"config file {p} cannot be read: {e.strerror or e}") from e
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{p}: TOML syntax error: {e}") from e
+    return _Ctx(p), data
+
+
+# --------------------------------------------------------------------------------------------
+# public
+# --------------------------------------------------------------------------------------------
+
+
+def load_case(path: str | os.PathLike[str]) -> Case:
+    """Load and validate a case file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The TOML case file. Log paths in it are relative to its directory.
+
+    Returns
+    -------
+    Case
+
+    Raises
+    ------
+    ConfigError
+        On a TOML syntax error (file and line), an unknown key, a wrong type, a missing required
+        key, a non-finite number, ``start_s >= end_s``, a log that does not exist (the resolved
+        path is named), spectral inputs/outputs that name no signal or are both, a band with
+        ``lo <= 0``, ``lo >= hi`` or ``hi`` at or above Nyquist, ``overlap`` outside
+        ``[0, 0.95]``, non-positive ``windows_s`` or ``sample_rate_hz``. The message names the
+        file, the key path and the value.
+    """
+    ctx, data = _read_toml(path)
+    _check_keys(ctx, data, CASE_KEYS, "")
+    if "case" not in data:
+        raise ctx.error("case", "missing: a case file needs a [case] table with at least name")
+    head = _table(ctx, data["case"], "case")
+    _check_keys(ctx, head, _CASE_TABLE_KEYS, "case")
+    if "name" not in head:
+        raise ctx.error("case", "missing required key 'name'")
+    if "signals" not in data:
+        raise ctx.error("signals", "missing: a case file needs a [signals] table")
+    base = ctx.path.parent
+    signals = _parse_signals(ctx, data["signals"])
+    spectral = _parse_spectral(ctx, data["spectral"], signals) if "spectral" in data else None
+    return Case(
+        path=ctx.path,
+        name=_string(ctx, head["name"], "case.name"),
+        aircraft=_string(ctx, head["aircraft"], "case.aircraft", nonempty=False) if "aircraft" in head else "",
+        condition=_string(ctx, head["condition"], "case.condition", nonempty=False) if "condition" in head else "",
+        identify=_parse_records(ctx, data.get("identify"), "identify", base, required=True),
+        verify=_parse_records(ctx, data.get("verify"), "verify", base, required=False),
+        signals=signals,
+        spectral=spectral,
+        tables={k: data[k] for k in RAW_TABLE_KEYS if k in data},
+    )
+
+
+def load_channel_map(path: str | os.PathLike[str]) -> tuple[dict[str, SignalSpec], SpectralSettings | None]:
+    """Load the ``[signals]`` and optional ``[spectral]`` tables of a channel map.
+
+    A channel map holds only those two tables (``config/xv15_channels.toml``). A full case file
+    is accepted too, as the live monitor's ``--case`` takes one: its other tables must be known
+    case tables but are not validated here (its logs need not exist yet).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The TOML file.
+
+    Returns
+    -------
+    (dict[str, SignalSpec], SpectralSettings or None)
+
+    Raises
+    ------
+    ConfigError
+        As :func:`load_case`, for the two tables read and for unknown top-level keys.
+    """
+    ctx, data = _read_toml(path)
+    _check_keys(ctx, data, CASE_KEYS, "")
+    if "signals" not in data:
+        raise ctx.error("signals", "missing: a channel map needs a [signals] table")
+    signals = _parse_signals(ctx, data["signals"])
+    spectral = _parse_spectral(ctx, data["spectral"], signals) if "spectral" in data else None
+    return signals, spectral

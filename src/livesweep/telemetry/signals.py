@@ -1,0 +1,181 @@
+"""Named signals out of MCAP logs: the I/O edge between the logs and the numerics.
+
+A case file's ``[signals]`` table (:class:`~livesweep.config.SignalSpec`) says where each signal
+lives: a topic, a field, the field with the vehicle time stamp, and the scaling to engineering
+units. :func:`read_signals` reads the signals one record (:class:`~livesweep.config.RecordSpec`)
+needs and returns them raw: on the signal's own stamp clock, at the log's own (possibly
+irregular) rate, with NaN where a message carried ``null``. Nothing is resampled or repaired
+here; :mod:`livesweep.consistency.resample` does that and counts what it repairs.
+
+Works on any MCAP file with JSON channels (DESIGN.md §4.1), not only MAVLink.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from livesweep.config import RecordSpec, SignalSpec
+from livesweep.errors import ConfigError, LogFormatError
+from livesweep.telemetry.mcap_log import read_topics_fields
+
+__all__ = ["RawSignal", "read_signals"]
+
+
+@dataclass(frozen=True)
+class RawSignal:
+    """One signal as logged, scaled to engineering units.
+
+    Attributes
+    ----------
+    name : str
+        The signal's name in the case.
+    units : str
+        Units of ``values``.
+    t_s : numpy.ndarray
+        Sample times [s] on the signal's stamp clock: ``stamp * stamp_scale`` (vehicle time) or,
+        when the signal has no stamp field, the MCAP ``log_time`` in seconds (float64, so about
+        0.2 us resolution on a UNIX-epoch clock). In the log's message order (log time), which
+        may not be monotonic in the stamp; read-only.
+    values : numpy.ndarray
+        ``scale * raw + offset`` [units]; NaN where the message carried ``null``; read-only.
+    source : str
+        Where it came from, ``"<log file name>:<topic>.<field>"``.
+    """
+
+    name: str
+    units: str
+    t_s: np.ndarray
+    values: np.ndarray
+    source: str
+
+
+def _group_by_topic(specs: Iterable[SignalSpec]) -> dict[str, list[SignalSpec]]:
+    """Signals per topic, in first-seen order."""
+    groups: dict[str, list[SignalSpec]] = {}
+    for s in specs:
+        groups.setdefault(s.topic, []).append(s)
+    return groups
+
+
+def _read_topics(log: Path, groups: Mapping[str, list[SignalSpec]]) -> dict[str, dict[str, np.ndarray]]:
+    """Every field (values and stamps) of every topic the signals need, in one pass over the log."""
+    requests: dict[str, list[str]] = {}
+    for topic, specs in groups.items():
+        fields = requests.setdefault(topic, [])
+        for s in specs:
+            for f in (s.field, s.stamp):
+                if f is not None and f not in fields:
+                    fields.append(f)
+    try:
+        return read_topics_fields(log, requests, time="log")
+    except LogFormatError as e:
+        names = ", ".join(s.name for specs in groups.values() for s in specs)
+        raise LogFormatError(f"signal(s) {names}: {e}") from e
+
+
+def _stamp_seconds(spec: SignalSpec, cols: Mapping[str, np.ndarray]) -> np.ndarray:
+    if spec.stamp is None:
+        return cols["t_ns"].astype(np.float64) / 1e9
+    return cols[spec.stamp] * spec.stamp_scale
+
+
+def _crop(t: np.ndarray, record: RecordSpec) -> np.ndarray:
+    """Mask of samples in ``[start_s, end_s)``; samples with a NaN stamp are kept (the resampler
+    drops and counts them)."""
+    keep = np.ones(t.shape, dtype=bool)
+    if record.start_s is not None:
+        keep &= ~(t < record.start_s)
+    if record.end_s is not None:
+        keep &= ~(t >= record.end_s)
+    return keep
+
+
+def _range_text(record: RecordSpec) -> str:
+    lo = "start" if record.start_s is None else f"{float(record.start_s)!r} s"
+    hi = "end" if record.end_s is None else f"{float(record.end_s)!r} s"
+    return f"[{lo}, {hi})"
+
+
+def _make_signal(log: Path, record: RecordSpec, spec: SignalSpec, cols: Mapping[str, np.ndarray]) -> RawSignal:
+    where = f"{log}: signal {spec.name!r} (topic {spec.topic!r}, field {spec.field!r})"
+    t = _stamp_seconds(spec, cols)
+    if t.size == 0:
+        raise LogFormatError(f"{where}: the topic has no messages")
+    keep = _crop(t, record)
+    if not keep.any():
+        finite = t[np.isfinite(t)]
+        span = f"{float(finite.min())!r} s to {float(finite.max())!r} s" if finite.size else "no finite stamps"
+        clock = f"stamp {spec.stamp!r}" if spec.stamp else "log_time"
+        raise LogFormatError(
+            f"{where}: no samples in the requested time range {_range_text(record)}; "
+            f"the log has {span} on the {clock} clock"
+        )
+    t = t[keep]
+    values = spec.scale * cols[spec.field][keep] + spec.offset
+    finite = values[np.isfinite(values)]
+    if finite.size == 0:
+        raise LogFormatError(f"{where}: all {values.size} values in {_range_text(record)} are NaN (null)")
+    if np.ptp(finite) == 0.0:
+        units = f" {spec.units}" if spec.units else ""
+        raise LogFormatError(
+            f"{where}: constant at {float(finite[0])!r}{units} over {_range_text(record)} "
+            f"({values.size} samples); a constant signal cannot be identified"
+        )
+    t.setflags(write=False)
+    values.setflags(write=False)
+    return RawSignal(name=spec.name, units=spec.units, t_s=t, values=values,
+                     source=f"{log.name}:{spec.topic}.{spec.field}")
+
+
+def read_signals(record: RecordSpec, signals: Mapping[str, SignalSpec], names: Iterable[str]) -> dict[str, RawSignal]:
+    """Read named signals from one log.
+
+    The log is read once for all topics (:func:`~livesweep.telemetry.mcap_log.read_topics_fields`),
+    values are scaled (``scale * raw + offset``) and cropped to
+    ``[record.start_s, record.end_s)`` on each signal's stamp clock [s].
+
+    Parameters
+    ----------
+    record : RecordSpec
+        The log and the optional time slice [s].
+    signals : Mapping[str, SignalSpec]
+        Where each signal lives (a case's ``[signals]``).
+    names : iterable of str
+        Which signals to read.
+
+    Returns
+    -------
+    dict[str, RawSignal]
+        In the order of ``names``.
+
+    Raises
+    ------
+    ConfigError
+        A name not in ``signals``; ``start_s >= end_s``.
+    LogFormatError
+        Naming the log file, topic and field: the log is missing or not MCAP; the topic is not
+        in the log (the topics present are listed); a field is missing or not a number; no
+        samples in the time range; a signal whose values are all NaN or constant.
+    """
+    names = list(dict.fromkeys(names))
+    if not names:
+        raise ConfigError(f"{record.log}: no signals asked for")
+    for n in names:
+        if n not in signals:
+            raise ConfigError(f"{record.log}: signal {n!r} is not defined; defined signals: {', '.join(signals)}")
+    if record.start_s is not None and record.end_s is not None and record.start_s >= record.end_s:
+        raise ConfigError(f"{record.log}: start_s = {record.start_s!r} must be before end_s = {record.end_s!r}")
+    log = Path(record.log)
+    out: dict[str, RawSignal] = {}
+    specs_by_name = {n: replace(signals[n], name=n) for n in names}  # the key is the name
+    groups = _group_by_topic(specs_by_name.values())
+    all_cols = _read_topics(log, groups)
+    for topic, specs in groups.items():
+        cols = all_cols[topic]
+        for s in specs:
+            out[s.name] = _make_signal(log, record, s, cols)
+    return {n: out[n] for n in names}
