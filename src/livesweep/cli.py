@@ -1,7 +1,7 @@
 """The ``livesweep`` command.
 
-Verbs so far: ``sim`` (simulate a test point to MCAP and/or live MAVLink) and ``demo`` (the one
-command a newcomer runs first). Bad input prints one line ``livesweep: error: ...`` and exits 2.
+Verbs so far: ``sim`` (simulate a test point to MCAP and/or live MAVLink), ``identify`` (frequency
+responses from a case file) and ``demo`` (the one command a newcomer runs first). Bad input prints one line ``livesweep: error: ...`` and exits 2.
 """
 
 from __future__ import annotations
@@ -140,6 +140,41 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def cmd_identify(args) -> int:
+    """Identify from a case file: for now the frequency-response stage."""
+    from livesweep.config import load_case
+    from livesweep.pipeline.frequency_response import run_frequency_response_stage
+    from livesweep.report.writer import prepare_out_dir, write_frequency_report
+
+    prepare_out_dir(args.out)
+    case = load_case(args.case)
+    stage = run_frequency_response_stage(case)
+    path = write_frequency_report(stage, args.out)
+    best = stage.analysis.best
+    dq = stage.data_quality
+    print(f"{case.name}: {len(best.outputs)} outputs x {len(best.inputs)} inputs, "
+          f"{'MISO-conditioned' if best.conditioned else 'SISO'} composite of windows {best.settings['windows_s']} s "
+          f"over {dq['duration_s']:.0f} s at {dq['sample_rate_hz']:g} Hz")
+    print(f"  {'pair':12s} {'adequate':>9s}  widest band gamma^2>=0.6, eps<=0.2 [rad/s]")
+    for a in stage.adequacy:
+        band = "-" if a.widest_band_rad_s is None else "%.2f .. %.2f" % a.widest_band_rad_s
+        print(f"  {a.output + '/' + a.input:12s} {100 * a.fraction:8.0f}%  {band}")
+    for c in dq["kinematic_checks"]:
+        if "error" in c:
+            print(f"  kinematic check {c['measured']} vs {c['reconstructed_from']}: not run ({c['error']})")
+        else:
+            print(f"  kinematic check {c['name']}: scale {c['scale_factor_error']:+.3f}, skew {1000 * c['skew_s']:+.0f} ms, "
+                  f"rate bias {c['rate_bias']:+.3f} {c['rate_bias_units']}: {'pass' if c['passed'] else 'FAIL'}")
+    repaired = {n: r for n, r in dq["repairs"].items() if any(r.values())}
+    wild = {n: w["replaced"] for n, w in dq["wild_points"].items() if w["replaced"]}
+    if repaired or wild:
+        print(f"  repairs: {repaired or 'none'}; wild points replaced: {wild or 'none'}")
+    for note in dq["notes"]:
+        print(f"  note: {note}")
+    print(f"wrote {path} and {path.parent / 'report.html'}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="livesweep", description="Frequency-sweep monitoring and system identification.")
     p.add_argument("--version", action="version", version=f"livesweep {__version__}")
@@ -165,6 +200,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--mavlink", help="stream MAVLink 2 to a pymavlink URL, e.g. udpout:127.0.0.1:14550")
     s.add_argument("--speed", type=_positive_float, default=1.0, help="stream pace: 1 = real time, 10 = ten times faster")
     s.set_defaults(func=cmd_sim)
+
+    i = sub.add_parser("identify", help="identify from a case file (DESIGN.md §4.2) and write report.json, report.html, plots")
+    i.add_argument("case", help="case file (TOML)")
+    i.add_argument("--out", required=True, help="folder for the report")
+    i.add_argument("--stage", default="frequency-response", choices=["frequency-response"],
+                   help="last stage to run (more stages come with the parametric issues)")
+    i.set_defaults(func=cmd_identify)
 
     d = sub.add_parser("demo", help="simulate the XV-15 cruise sweeps and write an MCAP log")
     d.add_argument("--out", help="folder for the log (default: a new temporary folder)")

@@ -81,8 +81,12 @@ def check_settings(values: np.ndarray, names, sample_rate_hz: float, inputs, out
             raise ConfigError(f"window {w:g} s is longer than half the record ({record_s / 2:.1f} s)")
         if w * sample_rate_hz < 8:
             raise ConfigError(f"window {w:g} s holds fewer than 8 samples at {sample_rate_hz:g} Hz")
-    if MIN_PERIODS_PER_WINDOW * 2 * math.pi / max(windows_s) > hi:
-        raise ConfigError(f"the longest window ({max(windows_s):g} s) cannot resolve any of band_rad_s = [{lo:g}, {hi:g}]")
+    lowest = MIN_PERIODS_PER_WINDOW * 2 * math.pi / max(windows_s)
+    if lowest > lo * (1 + 1e-9):
+        raise ConfigError(
+            f"band_rad_s starts at {lo:g} rad/s but the longest window ({max(windows_s):g} s) resolves only from "
+            f"{lowest:.3g} rad/s ({MIN_PERIODS_PER_WINDOW:g} periods per window): raise the band's lower end or "
+            f"lengthen the windows (at most half the record, {record_s / 2:.1f} s)")
     return windows_s
 
 

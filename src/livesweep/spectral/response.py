@@ -27,7 +27,17 @@ def _mag_db(H):
 
 
 def _phase_deg(H):
-    return np.rad2deg(np.unwrap(np.angle(H)))
+    """Phase [deg] unwrapped along frequency across the finite points (NaN stays NaN)."""
+    H = np.asarray(H)
+    out = np.full(H.shape, np.nan)
+    ok = np.isfinite(H)
+    out[ok] = np.rad2deg(np.unwrap(np.angle(H[ok])))
+    return out
+
+
+def _json_list(x):
+    """Floats for JSON: non-finite values become null."""
+    return [float(v) if np.isfinite(v) else None for v in np.asarray(x, float)]
 
 
 def _frozen(a, dtype=None):
@@ -101,17 +111,17 @@ class FrequencyResponse:
         return {
             "output": self.output, "input": self.input,
             "omega_rad_s": self.omega.tolist(),
-            "magnitude_db": self.magnitude_db.tolist(),
-            "phase_deg": self.phase_deg.tolist(),
-            "coherence": self.coherence.tolist(),
-            "random_error": [float(e) if np.isfinite(e) else None for e in self.random_error],
+            "magnitude_db": _json_list(self.magnitude_db),
+            "phase_deg": _json_list(self.phase_deg),
+            "coherence": _json_list(self.coherence),
+            "random_error": _json_list(self.random_error),
             "conditioned": bool(self.conditioned),
         }
 
     @classmethod
     def from_dict(cls, d: dict) -> "FrequencyResponse":
-        mag = np.asarray(d["magnitude_db"], float)
-        ph = np.deg2rad(np.asarray(d["phase_deg"], float))
+        mag = np.array([np.nan if v is None else v for v in d["magnitude_db"]], float)
+        ph = np.deg2rad(np.array([np.nan if v is None else v for v in d["phase_deg"]], float))
         err = np.array([np.inf if e is None else e for e in d["random_error"]], float)
         return cls(d["output"], d["input"], _frozen(d["omega_rad_s"], float), 10 ** (mag / 20) * np.exp(1j * ph),
                    _frozen(d["coherence"], float), err, bool(d.get("conditioned", False)))
@@ -179,7 +189,9 @@ class FrequencyResponseSet:
         d = {
             "outputs": list(self.outputs), "inputs": list(self.inputs), "conditioned": self.conditioned,
             "omega_rad_s": self.omega.tolist(),
-            "H_re": self.H.real.tolist(), "H_im": self.H.imag.tolist(),
+            "H_re": np.where(np.isfinite(self.H), self.H.real, 0.0).tolist(),
+            "H_im": np.where(np.isfinite(self.H), self.H.imag, 0.0).tolist(),
+            "H_finite": np.isfinite(self.H).tolist(),
             "coherence": self.coherence.tolist(),
             "random_error": np.where(np.isfinite(self.random_error), self.random_error, -1.0).tolist(),
             "settings": self.settings,
@@ -195,7 +207,8 @@ class FrequencyResponseSet:
         err = np.asarray(d["random_error"], float)
         return cls(
             outputs=tuple(d["outputs"]), inputs=tuple(d["inputs"]), omega=np.asarray(d["omega_rad_s"], float),
-            H=np.asarray(d["H_re"], float) + 1j * np.asarray(d["H_im"], float),
+            H=np.where(np.asarray(d.get("H_finite", True), bool),
+                       np.asarray(d["H_re"], float) + 1j * np.asarray(d["H_im"], float), np.nan + 0j),
             coherence=np.asarray(d["coherence"], float), random_error=np.where(err < 0, np.inf, err),
             conditioned=bool(d["conditioned"]),
             multiple_coherence=None if "multiple_coherence" not in d else np.asarray(d["multiple_coherence"], float),

@@ -1,0 +1,58 @@
+"""Excitation adequacy of a pair: where the response is accurate enough to fit (method.md §2.5)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from livesweep.spectral.response import FrequencyResponse
+
+__all__ = ["PairAdequacy", "pair_adequacy", "MIN_COHERENCE", "MAX_RANDOM_ERROR"]
+
+MIN_COHERENCE = 0.6
+MAX_RANDOM_ERROR = 0.2
+
+
+@dataclass(frozen=True)
+class PairAdequacy:
+    """Where one pair's response is adequate: gamma^2 >= 0.6 and eps_r <= 0.2.
+
+    Attributes
+    ----------
+    output, input : str
+    bands_rad_s : tuple of (float, float)
+        Contiguous adequate stretches of the frequency grid [rad/s].
+    widest_band_rad_s : (float, float) or None
+        The widest stretch (in decades), or None when nothing is adequate.
+    fraction : float
+        Fraction of the grid (log-spaced, so of the decades) that is adequate.
+    median_coherence : float
+        Over the whole grid.
+    """
+
+    output: str
+    input: str
+    bands_rad_s: tuple
+    widest_band_rad_s: tuple | None
+    fraction: float
+    median_coherence: float
+
+    def to_dict(self) -> dict:
+        return {"output": self.output, "input": self.input,
+                "bands_rad_s": [list(b) for b in self.bands_rad_s],
+                "widest_band_rad_s": None if self.widest_band_rad_s is None else list(self.widest_band_rad_s),
+                "fraction_of_band": round(self.fraction, 4), "median_coherence": round(self.median_coherence, 4),
+                "criteria": {"min_coherence": MIN_COHERENCE, "max_random_error": MAX_RANDOM_ERROR}}
+
+
+def pair_adequacy(resp: FrequencyResponse, min_coherence: float = MIN_COHERENCE,
+                  max_random_error: float = MAX_RANDOM_ERROR) -> PairAdequacy:
+    """Adequate stretches of one response."""
+    ok = (resp.coherence >= min_coherence) & (resp.random_error <= max_random_error)
+    w = resp.omega
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(int), [0]])))
+    bands = tuple((float(w[a]), float(w[b - 1])) for a, b in zip(edges[::2], edges[1::2]))
+    widest = max(bands, key=lambda b: np.log10(b[1] / b[0]), default=None)
+    return PairAdequacy(resp.output, resp.input, bands, widest, float(np.mean(ok)) if ok.size else 0.0,
+                        float(np.median(resp.coherence)) if resp.coherence.size else 0.0)
