@@ -130,3 +130,11 @@ def test_case_files_name_only_signals_the_channel_map_knows():
         assert set(sp["inputs"]) | set(sp["outputs"]) <= set(c["signals"])
         for rec in c["identify"] + c.get("verify", []):
             assert (CONFIG / rec["log"]).resolve().exists(), rec["log"]
+
+
+def test_packaged_channel_map_is_the_config_one():
+    """`livesweep demo` reads the copy inside the package (it must work from a plain install)."""
+    import livesweep
+
+    packaged = Path(livesweep.__file__).parent / "data" / "xv15_channels.toml"
+    assert packaged.read_text() == (CONFIG / "xv15_channels.toml").read_text()

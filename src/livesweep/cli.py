@@ -114,8 +114,27 @@ def cmd_sim(args) -> int:
     return 0
 
 
+DEMO_CASE = """# Written by `livesweep demo`: the frequency-response case for the demo log (DESIGN.md §4.2).
+[case]
+name = "xv15-cruise-aileron-demo"
+aircraft = "XV-15"
+condition = "cruise, 170 kn TAS (simulated)"
+
+[[identify]]
+log = "xv15_cruise_sweeps_da.mcap"
+label = "aileron sweeps x2"
+
+{signals}
+[spectral]
+inputs = ["da"]
+outputs = ["p", "r", "ay", "beta"]
+band_rad_s = [0.3, 20.0]
+sample_rate_hz = 50.0
+"""
+
+
 def cmd_demo(args) -> int:
-    """Simulate the XV-15 cruise aileron sweeps and write them as an MCAP log."""
+    """Simulate the XV-15 cruise aileron sweeps, write them as MCAP, and identify their frequency responses."""
     from livesweep.sim.samples import SAMPLE_LOGS, sample_scenario
     from livesweep.sim.scenario import simulate
     from livesweep.telemetry.sim_telemetry import write_sim_log
@@ -136,8 +155,12 @@ def cmd_demo(args) -> int:
     for s in result.segments:
         if s.kind != "trim":
             print(f"    {s.label:16s} {s.start_s:8.1f} .. {s.end_s:8.1f} s")
-    print(f"open it in Foxglove or any MCAP viewer, or read it with livesweep.telemetry.mcap_log: {path}")
-    return 0
+    print()
+    channels = (Path(__file__).resolve().parent / "data" / "xv15_channels.toml").read_text()
+    signals = channels[channels.index("[signals.da]"):channels.index("[spectral]")]
+    case = out_dir / "demo_case.toml"
+    case.write_text(DEMO_CASE.format(signals=signals))
+    return cmd_identify(argparse.Namespace(case=str(case), out=str(out_dir / "report"), stage="frequency-response"))
 
 
 def cmd_identify(args) -> int:
@@ -208,7 +231,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="last stage to run (more stages come with the parametric issues)")
     i.set_defaults(func=cmd_identify)
 
-    d = sub.add_parser("demo", help="simulate the XV-15 cruise sweeps and write an MCAP log")
+    d = sub.add_parser("demo", help="simulate the XV-15 cruise sweeps to MCAP and identify their frequency responses")
     d.add_argument("--out", help="folder for the log (default: a new temporary folder)")
     d.set_defaults(func=cmd_demo)
     return p
