@@ -5,6 +5,10 @@ flagged) -> wild points replaced, trim biases removed -> kinematic consistency c
 composite SISO (and MISO-conditioned) responses -> excitation adequacy per pair.
 
 Everything repaired is counted in ``data_quality``; nothing is changed silently.
+
+Concatenated records: spectral windows may span the joins, as the method concatenates repeated
+sweeps for more low-frequency averages (method.md §4.1); this is sound because flown records
+start and end in trim and each part's trim is removed before the spectra.
 """
 
 from __future__ import annotations
