@@ -168,3 +168,54 @@ def test_constant_input_is_refused_by_name(tmp_path):
     case = write_case(tmp_path, ROOT / "replay_logs" / "xv15_cruise_sweeps_da.mcap", signals=sig)
     r = identify(case, tmp_path / "out")
     assert r.returncode == 2 and "constant" in r.stderr and "da" in r.stderr
+
+
+def test_full_euler_kinematics_are_used_when_every_rate_and_angle_is_logged(tmp_path):
+    """Large attitudes (phi to 40 deg, theta to 25 deg) on a generic JSON log: with p, q, r, phi and
+    theta the check integrates the 3-2-1 Euler rates and passes; phi against p alone would not."""
+    from livesweep.consistency.kinematics import check_angle_against_rate
+    from livesweep.telemetry.mcap_log import McapLogWriter
+
+    fs = 100.0
+    t = np.arange(0, 240, 1 / fs)
+    sweep = lambda a, w0, k: a * np.sin(w0 * t + k * t**2)        # noqa: E731
+    phi, theta, psi = np.deg2rad(sweep(40, 0.2, 0.01)), np.deg2rad(sweep(25, 0.3, 0.008)), np.deg2rad(sweep(60, 0.1, 0.005))
+    dphi, dtheta, dpsi = (np.gradient(x, t, edge_order=2) for x in (phi, theta, psi))
+    # inverse 3-2-1 kinematics, written here: body rates from Euler angles and their rates
+    p = dphi - dpsi * np.sin(theta)
+    q = dtheta * np.cos(phi) + dpsi * np.cos(theta) * np.sin(phi)
+    r = -dtheta * np.sin(phi) + dpsi * np.cos(theta) * np.cos(phi)
+    elev = sweep(1.0, 0.3, 0.05)
+    with McapLogWriter(tmp_path / "att.mcap") as w:
+        w.add_channel("/fdr/state", "fdr.State", {"type": "object"})
+        for k in range(t.size):
+            w.write("/fdr/state", {"t": t[k], "phi": np.rad2deg(phi[k]), "theta": np.rad2deg(theta[k]),
+                                   "p": p[k], "q": q[k], "r": r[k], "de": elev[k]},
+                    log_time_ns=int(round(t[k] * 1e9)) + 1)
+    sig = "".join(f'[signals.{n}]\ntopic = "/fdr/state"\nfield = "{n}"\nstamp = "t"\nunits = "{u}"\n\n'
+                  for n, u in [("phi", "deg"), ("theta", "deg"), ("p", "rad/s"), ("q", "rad/s"), ("r", "rad/s"), ("de", "")])
+    case = tmp_path / "case.toml"
+    case.write_text(f'[case]\nname = "euler"\n\n[[identify]]\nlog = "att.mcap"\n\n{sig}[spectral]\ninputs = ["de"]\n'
+                    'outputs = ["q"]\nband_rad_s = [0.5, 10.0]\nsample_rate_hz = 50.0\n')
+    dq = run_frequency_response_stage(load_case(case)).data_quality
+    checks = {c["measured"]: c for c in dq["kinematic_checks"]}
+    assert set(checks) == {"phi", "theta"}
+    for c in checks.values():
+        assert c["passed"] and abs(c["scale_factor_error"]) < 0.005 and abs(c["skew_s"]) < 0.002, c
+    assert "Euler rate(p, q, r, phi, theta)" in checks["phi"]["reconstructed_from"]
+    naive = check_angle_against_rate(np.rad2deg(phi[::2]), np.rad2deg(p[::2]), 50.0, band_rad_s=(0.3, 10.0))
+    assert not naive.passed
+
+
+def test_the_full_response_set_is_saved_for_later_stages(cruise_report):
+    from livesweep.report.writer import load_response_set
+
+    out, rep, _ = cruise_report
+    frs = load_response_set(out / rep["frequency_response_set"])
+    assert frs.conditioned and frs.outputs == ("p", "r", "ay", "beta") and frs.inputs == ("da", "dr")
+    assert frs.settings["windows_s"] == [7.0, 12.0, 20.0, 40.0, 80.0]
+    p_da = next(f for f in rep["frequency_responses"] if f["output"] == "p" and f["input"] == "da")
+    np.testing.assert_allclose(frs.pair("p", "da").magnitude_db, p_da["magnitude_db"], rtol=1e-12)
+    np.testing.assert_allclose(frs.pair("p", "da").phase_deg, p_da["phase_deg"], rtol=1e-12)
+    ordinary = load_response_set(out / ("ordinary_" + rep["frequency_response_set"]))
+    assert not ordinary.conditioned

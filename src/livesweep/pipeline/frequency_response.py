@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from livesweep.config import Case, RecordSpec
-from livesweep.consistency.kinematics import check_angle_against_rate
+from livesweep.consistency.kinematics import check_angle_against_rate, euler_angle_rates
 from livesweep.consistency.resample import UniformRecord, concatenate, resample_uniform
 from livesweep.consistency.wildpoints import replace_wild_points
 from livesweep.errors import ConfigError
@@ -28,7 +28,7 @@ from livesweep.telemetry.signals import read_signals
 
 __all__ = ["FrequencyResponseStage", "load_record", "run_frequency_response_stage", "KINEMATIC_PAIRS"]
 
-#: (angle, rate) signal names checked against each other when a case has both
+#: (angle, rate) signal names checked against each other when a case has both (names by convention)
 KINEMATIC_PAIRS = (("phi", "p"), ("theta", "q"), ("psi", "r"))
 _RAD_UNITS = {"rad": "deg", "rad/s": "deg/s"}
 
@@ -90,27 +90,55 @@ def _repair(record: UniformRecord):
     return replace(record, values=values), wild, bias
 
 
+def _in_deg(case: Case, record: UniformRecord, name: str) -> np.ndarray:
+    """A signal in deg or deg/s (rad and rad/s converted by their declared units)."""
+    return record.signal(name) * (np.rad2deg(1.0) if case.signals[name].units in _RAD_UNITS else 1.0)
+
+
+def _euler_rate_sources(case: Case, record: UniformRecord) -> dict[str, tuple[np.ndarray, tuple[str, ...]]]:
+    """Euler-angle rates [deg/s] to integrate for each angle, and the signals they were built from.
+
+    With p, q, r, phi and theta all in the record, the full 3-2-1 kinematics
+    (phi' = p + (q sin phi + r cos phi) tan theta, ...); otherwise each angle against its body
+    rate alone (phi vs p, theta vs q, psi vs r), exact for level lateral or longitudinal motion.
+    """
+    have = set(record.names)
+    if {"p", "q", "r", "phi", "theta"} <= have:
+        d2r = np.deg2rad(1.0)
+        p, q, r, phi, theta = (_in_deg(case, record, n) * d2r for n in ("p", "q", "r", "phi", "theta"))
+        rates = euler_angle_rates(p, q, r, phi, theta)
+        out = {"phi": (np.rad2deg(rates[0]), ("p", "q", "r", "phi", "theta")),
+               "theta": (np.rad2deg(rates[1]), ("q", "r", "phi"))}
+        if "psi" in have:
+            out["psi"] = (np.rad2deg(rates[2]), ("q", "r", "phi", "theta"))
+        return out
+    return {angle: (_in_deg(case, record, rate), (rate,)) for angle, rate in KINEMATIC_PAIRS
+            if angle in have and rate in have}
+
+
 def _kinematic_checks(case: Case, record: UniformRecord):
     checks = []
-    for angle, rate in KINEMATIC_PAIRS:
-        if angle not in record.names or rate not in record.names:
-            continue
-        ua, ur = case.signals[angle].units, case.signals[rate].units
-        a = record.signal(angle) * (np.rad2deg(1.0) if ua == "rad" else 1.0)
-        r = record.signal(rate) * (np.rad2deg(1.0) if ur == "rad/s" else 1.0)
-        valid = record.valid_of(angle) & record.valid_of(rate)
+    sources = _euler_rate_sources(case, record)
+    for angle, (rate, used) in sources.items():
+        source = used[0] if len(used) == 1 else f"Euler rate({', '.join(used)})"
+        a = _in_deg(case, record, angle)
+        if angle == "psi":
+            a = np.rad2deg(np.unwrap(np.deg2rad(a)))      # heading wraps at +/-180 deg
+        valid = record.valid_of(angle)
+        for n in used:
+            valid = valid & record.valid_of(n)
         lo = max(0.3, case.spectral.band_rad_s[0])
         hi = min(10.0, case.spectral.band_rad_s[1], 0.4 * np.pi * record.sample_rate_hz)
         try:
-            c = check_angle_against_rate(a, r, record.sample_rate_hz, valid=valid, band_rad_s=(lo, hi),
-                                         angle_name=angle, rate_name=rate)
+            c = check_angle_against_rate(a, rate, record.sample_rate_hz, valid=valid, band_rad_s=(lo, hi),
+                                         angle_name=angle, rate_name=source)
         except ConfigError as exc:
-            checks.append({"measured": angle, "reconstructed_from": rate, "error": str(exc)})
+            checks.append({"measured": angle, "reconstructed_from": source, "error": str(exc)})
             continue
         checks.append({
-            "name": c.name, "measured": angle, "reconstructed_from": f"integral of {rate}",
+            "name": f"{angle} vs integral of {source}", "measured": angle, "reconstructed_from": f"integral of {source}",
             "scale_factor_error": round(c.scale_factor_error, 5), "skew_s": round(c.skew_s, 5),
-            "rate_bias": round(c.rate_bias, 5), "rate_bias_units": _RAD_UNITS.get(ur, ur) or "rate units",
+            "rate_bias": round(c.rate_bias, 5), "rate_bias_units": "deg/s",
             "rms_residual": round(c.rms_residual, 5), "band_rad_s": list(c.band_rad_s),
             "tolerance_scale": c.tolerance_scale, "tolerance_skew_s": c.tolerance_skew_s, "passed": bool(c.passed),
             "model": "angle(t) = (1 + scale_factor_error) * integral(rate)(t - skew_s) + a + b t",

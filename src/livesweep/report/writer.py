@@ -12,7 +12,11 @@ from livesweep import __version__
 from livesweep.errors import ConfigError
 from livesweep.report.plots import bode_plot
 
-__all__ = ["write_frequency_report", "prepare_out_dir"]
+__all__ = ["write_frequency_report", "prepare_out_dir", "save_response_set", "load_response_set",
+           "RESPONSE_SET_FILE"]
+
+#: the stage's full frequency-response set (complex H, settings), for the parametric stages
+RESPONSE_SET_FILE = "frequency_response_set.json"
 
 
 def prepare_out_dir(path) -> Path:
@@ -27,6 +31,28 @@ def prepare_out_dir(path) -> Path:
     if not os.access(out, os.W_OK):
         raise ConfigError(f"--out {str(out)!r} is not writable")
     return out
+
+
+def save_response_set(response_set, path) -> Path:
+    """Write a FrequencyResponseSet (and nothing else) as JSON, atomically."""
+    path = Path(path)
+    _atomic_write(path, json.dumps({"format": "livesweep.frequency_response_set/1", **response_set.to_dict()},
+                                   allow_nan=False))
+    return path
+
+
+def load_response_set(path):
+    """Read a FrequencyResponseSet written by :func:`save_response_set`; ConfigError naming the file."""
+    from livesweep.spectral.response import FrequencyResponseSet
+
+    path = Path(path)
+    try:
+        d = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read a frequency-response set: {exc}") from None
+    if d.get("format") != "livesweep.frequency_response_set/1":
+        raise ConfigError(f"{path}: not a livesweep frequency-response set (format {d.get('format')!r})")
+    return FrequencyResponseSet.from_dict(d)
 
 
 def _atomic_write(path: Path, text: str) -> None:
@@ -63,6 +89,10 @@ def write_frequency_report(stage, out_dir) -> Path:
         report["frequency_responses_ordinary"] = [p.to_dict() for p in an.siso.pairs()]
         report["multiple_coherence"] = {o: best.multiple_coherence[k].tolist() for k, o in enumerate(best.outputs)}
         report["ill_conditioned"] = best.ill_conditioned.astype(bool).tolist()
+    save_response_set(best, out / RESPONSE_SET_FILE)
+    report["frequency_response_set"] = RESPONSE_SET_FILE
+    if best.conditioned:
+        save_response_set(an.siso, out / ("ordinary_" + RESPONSE_SET_FILE))
     path = out / "report.json"
     _atomic_write(path, json.dumps(report, indent=1, allow_nan=False))
     _atomic_write(out / "report.html", _html(report))
