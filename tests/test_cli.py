@@ -39,7 +39,7 @@ def test_sim_writes_a_verification_log_with_an_effect(tmp_path):
 @pytest.mark.parametrize("args, message", [
     (["--omega-min", "2", "--omega-max", "1"], "omega_min_rad_s (2) must be below omega_max_rad_s (1)"),
     (["--duration", "5"], "duration_s = 5 s is too short for omega_min_rad_s = 0.3"),
-    (["--amplitude", "0"], "amplitude must be a finite number > 0, got 0.0"),
+    (["--amplitude", "0"], "amplitude must be > 0, got 0.0"),
     (["--model", "f16"], "unknown model 'f16'"),
     (["--effect", "gremlin:output=p"], "unknown effect 'gremlin'"),
     (["--effect", "sensor_skew:output=q,delay_s=0.05"], "unknown output 'q'"),

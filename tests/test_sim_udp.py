@@ -7,7 +7,6 @@ import threading
 import time
 
 import numpy as np
-import pytest
 
 from livesweep.telemetry import mavlink_codec as codec  # sets MAVLINK20 before pymavlink loads
 from livesweep.sim.scenario import simulate, sweep_scenario

@@ -15,3 +15,34 @@ class ConfigError(LivesweepError, ValueError):
 
 class LogFormatError(LivesweepError):
     """A log file cannot be read or written as asked."""
+
+
+def require_number(value, what: str, *, positive: bool = False, nonnegative: bool = False,
+                   upper: float | None = None) -> float:
+    """``value`` as a finite float, or ConfigError saying what is wrong with ``what``.
+
+    Parameters
+    ----------
+    value : object
+    what : str
+        How the message names the value, e.g. ``"effect actuator_lag: time_constant_s"``.
+    positive, nonnegative : bool
+        Require ``> 0`` / ``>= 0``.
+    upper : float, optional
+        Require ``|value| <= upper``.
+    """
+    import math
+
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{what} must be a number, got {value!r}") from None
+    if not math.isfinite(v):
+        raise ConfigError(f"{what} must be finite, got {value!r}")
+    if positive and v <= 0:
+        raise ConfigError(f"{what} must be > 0, got {value!r}")
+    if nonnegative and v < 0:
+        raise ConfigError(f"{what} must be >= 0, got {value!r}")
+    if upper is not None and abs(v) > upper:
+        raise ConfigError(f"|{what}| must be <= {upper:g}, got {value!r}")
+    return v

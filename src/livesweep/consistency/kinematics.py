@@ -15,7 +15,7 @@ from scipy.interpolate import CubicSpline
 from scipy.optimize import minimize_scalar
 from scipy.signal import butter, detrend, sosfiltfilt
 
-from livesweep.errors import ConfigError
+from livesweep.errors import ConfigError, require_number
 
 __all__ = ["euler_angle_rates", "KinematicCheck", "check_angle_against_rate"]
 
@@ -120,13 +120,7 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 def _finite_number(what: str, value, label: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"angle/rate check {label}: {what} must be a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ConfigError(f"angle/rate check {label}: {what} must be finite, got {value!r}")
-    return v
+    return require_number(value, f"angle/rate check {label}: {what}")
 
 
 def check_angle_against_rate(

@@ -22,7 +22,7 @@ from livesweep.consistency.kinematics import check_angle_against_rate, euler_ang
 from livesweep.consistency.resample import UniformRecord, concatenate, resample_uniform
 from livesweep.consistency.wildpoints import replace_wild_points
 from livesweep.errors import ConfigError
-from livesweep.spectral.adequacy import PairAdequacy, pair_adequacy
+from livesweep.spectral.adequacy import pair_adequacy
 from livesweep.spectral.analysis import SpectralAnalysis, analyze
 from livesweep.telemetry.signals import read_signals
 

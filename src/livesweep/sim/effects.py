@@ -30,13 +30,12 @@ measurement, in the order skew -> dynamics -> scale -> bias -> noise -> spikes -
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
 from typing import ClassVar
 
 import numpy as np
 
-from livesweep.errors import ConfigError
+from livesweep.errors import ConfigError, require_number
 
 __all__ = [
     "Effect",
@@ -56,19 +55,7 @@ __all__ = [
 
 
 def _num(kind, name, value, *, positive=False, nonneg=False, upper=None):
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"effect {kind}: {name} must be a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ConfigError(f"effect {kind}: {name} must be finite, got {value!r}")
-    if positive and v <= 0:
-        raise ConfigError(f"effect {kind}: {name} must be > 0, got {value!r}")
-    if nonneg and v < 0:
-        raise ConfigError(f"effect {kind}: {name} must be >= 0, got {value!r}")
-    if upper is not None and abs(v) > upper:
-        raise ConfigError(f"effect {kind}: |{name}| must be <= {upper:g}, got {value!r}")
-    return v
+    return require_number(value, f"effect {kind}: {name}", positive=positive, nonnegative=nonneg, upper=upper)
 
 
 class Effect:

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal as sps
 
-from livesweep.errors import ConfigError
+from livesweep.errors import ConfigError, require_number
 
 __all__ = [
     "FrequencySweep",
@@ -26,23 +26,11 @@ __all__ = [
 
 
 def _finite_positive(name: str, value: float) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v) or v <= 0:
-        raise ConfigError(f"{name} must be a finite number > 0, got {value!r}")
-    return v
+    return require_number(value, name, positive=True)
 
 
 def _finite(name: str, value: float) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ConfigError(f"{name} must be finite, got {value!r}")
-    return v
+    return require_number(value, name)
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from livesweep.spectral.composite import composite_output_miso, composite_pair
 from livesweep.spectral.miso import input_coherence_max
 from livesweep.spectral.composite import interpolate_window
 from livesweep.spectral.response import FrequencyResponseSet
-from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW, WindowSpectra, window_spectra
+from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW, window_spectra
 from livesweep.spectral.windows import default_windows_s
 
 __all__ = ["SpectralAnalysis", "analyze", "check_settings"]
