@@ -1,0 +1,82 @@
+"""MCAP replay as a frame source: the same pipeline as live, from a log (DESIGN.md §1)."""
+
+from __future__ import annotations
+
+import math
+import time
+
+from livesweep.errors import ConfigError
+from livesweep.telemetry.frames import Frame
+from livesweep.telemetry.mcap_log import iter_file_order
+from livesweep.telemetry.recorder import RESULT_PREFIX
+
+__all__ = ["McapReplaySource"]
+
+
+class McapReplaySource:
+    """Frames of a recorded log in the order they were received.
+
+    Parameters
+    ----------
+    path : str or Path
+    speed : float
+        0 or inf: as fast as possible; N: N times real time (paced by the receive times).
+    include_results : bool
+        Replay livesweep's own ``/livesweep/...`` results too (default no: they are recomputed).
+    """
+
+    def __init__(self, path, *, speed: float = 0.0, include_results: bool = False,
+                 clock=time.monotonic, sleep=time.sleep):
+        if not (speed == 0 or speed > 0) or (isinstance(speed, float) and math.isnan(speed)):
+            raise ConfigError(f"replay speed must be > 0 (or 0 for as fast as possible), got {speed!r}")
+        self.path = path
+        self.speed = float(speed)
+        self._it = iter_file_order(path)
+        self._include_results = include_results
+        self._clock, self._sleep = clock, sleep
+        self._t0_log: int | None = None
+        self._t0_wall = 0.0
+        self._pending = None
+        self._finished = False
+        self._counts = {"replayed": {}, "skipped_results": 0}
+
+    @property
+    def counts(self) -> dict:
+        return self._counts
+
+    @property
+    def finished(self) -> bool:
+        return self._finished
+
+    def poll(self, timeout_s: float = 0.05, max_frames: int = 10_000) -> list[Frame]:
+        out: list[Frame] = []
+        paced = self.speed > 0 and math.isfinite(self.speed)
+        while len(out) < max_frames:
+            m = self._pending if self._pending is not None else next(self._it, None)
+            self._pending = None
+            if m is None:
+                self._finished = True
+                break
+            if m.topic.startswith(RESULT_PREFIX + "/") and not self._include_results:
+                self._counts["skipped_results"] += 1
+                continue
+            if paced:
+                if self._t0_log is None:
+                    self._t0_log, self._t0_wall = m.log_time_ns, self._clock()
+                due = self._t0_wall + (m.log_time_ns - self._t0_log) * 1e-9 / self.speed
+                wait = due - self._clock()
+                if wait > 0:
+                    if out or wait > timeout_s:
+                        self._pending = m
+                        if not out:
+                            self._sleep(timeout_s)
+                        break
+                    self._sleep(wait)
+            vehicle = m.publish_time_ns if m.publish_time_ns != m.log_time_ns else None
+            out.append(Frame(m.topic, m.log_time_ns, vehicle, m.data))
+            c = self._counts["replayed"]
+            c[m.topic] = c.get(m.topic, 0) + 1
+        return out
+
+    def close(self) -> None:
+        self._finished = True
