@@ -1,0 +1,296 @@
+"""The online (sliding-window) estimator against the batch spectral code on the same segments.
+
+The reference is ``livesweep.spectral.spectra.window_spectra`` (itself checked against
+``scipy.signal.csd`` in test_spectral_kernels.py) run on the slice of the record that holds exactly
+the segments the online window holds. Agreement is measured per element relative to
+``sqrt(G_ii G_jj)`` (the scale of a cross-spectrum), so cross terms near zero do not inflate it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from livesweep.errors import ConfigError
+from livesweep.spectral import online as online_mod
+from livesweep.spectral.miso import condition_output
+from livesweep.spectral.online import OnlineSpectralEstimator, default_segment_s
+from livesweep.spectral.spectra import coherence, random_error, window_spectra
+from livesweep.spectral.windows import plan_segments
+
+FS = 50.0
+NAMES = ["u1", "u2", "y"]
+BAND = (0.8, 20.0)
+SEG_S = 8.0          # 400 samples; 3 periods of 2.36 rad/s, so BAND's low end is below "usable" (fine here)
+TOL = 1e-9
+
+
+def _record(n=4000, seed=0):
+    rng = np.random.default_rng(seed)
+    u1 = rng.standard_normal(n)
+    u2 = 0.4 * u1 + rng.standard_normal(n)
+    kern = np.exp(-np.arange(30) / 6.0)
+    y = np.convolve(u1, kern)[:n] - 0.5 * np.convolve(u2, kern[:10])[:n] + 0.3 * rng.standard_normal(n)
+    x = np.vstack([u1, u2, y])
+    x *= np.linspace(0.5, 3.0, n)          # non-stationary level
+    return x + np.array([[1.0], [-2.0], [5.0]])   # offsets: the per-segment mean removal matters
+
+
+def _feed(est, x, sizes, valid=None, on_block=None):
+    i, k = 0, 0
+    while i < x.shape[1]:
+        m = int(sizes[k % len(sizes)])
+        est.update(x[:, i:i + m], None if valid is None else valid[i:i + m])
+        i = min(i + m, x.shape[1])
+        k += 1
+        if on_block is not None:
+            on_block(i)
+
+
+def _rel_err(G, Gref):
+    d = np.sqrt(np.abs(np.einsum("iif->if", Gref).real))
+    scale = d[:, None, :] * d[None, :, :]
+    return float(np.max(np.abs(G - Gref) / np.where(scale > 0, scale, 1.0)))
+
+
+def _expected_starts(consumed, n, hop, W):
+    starts = np.arange(0, consumed - n + 1, hop)
+    return starts[starts + n > consumed - W]
+
+
+@settings(max_examples=25, deadline=None)
+@given(sizes=st.lists(st.integers(1, 500), min_size=1, max_size=40), overlap=st.sampled_from([0.0, 0.5, 0.8]))
+def test_whole_record_in_random_blocks_equals_batch(sizes, overlap):
+    x = _record()
+    est = OnlineSpectralEstimator(NAMES, ["u1", "u2"], ["y"], FS, BAND, window_s=1000.0, segment_s=SEG_S,
+                                  overlap=overlap)
+    _feed(est, x, sizes)
+    r = est.result()
+    ws = window_spectra(x, NAMES, FS, SEG_S, BAND, overlap=overlap)
+    assert r.n_segments == ws.n_segments
+    assert r.n_eff == pytest.approx(ws.n_eff, rel=1e-12)
+    np.testing.assert_array_equal(r.omega, ws.omega)
+    assert _rel_err(r.G, ws.G) < TOL
+    assert r.t_end_s == pytest.approx(x.shape[1] / FS)
+    assert est.time_s == pytest.approx(x.shape[1] / FS)
+
+
+def test_responses_equal_batch_formulas():
+    x = _record()
+    est = OnlineSpectralEstimator(NAMES, ["u1", "u2"], ["y"], FS, BAND, window_s=1000.0, segment_s=SEG_S)
+    _feed(est, x, [137])
+    r = est.result()
+    ws = window_spectra(x, NAMES, FS, SEG_S, BAND)
+    o = r.ordinary
+    H_ref = ws.G[0, 2] / ws.G[0, 0].real
+    np.testing.assert_allclose(o.H[0, 0], H_ref, rtol=1e-9)
+    np.testing.assert_allclose(o.coherence[0, 1], coherence(ws.G, 1, 2), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(o.random_error[0, 0], random_error(coherence(ws.G, 0, 2), ws.n_eff), rtol=1e-8)
+    c = condition_output(ws.G, [0, 1], 2)
+    m = r.conditioned
+    assert m.conditioned and not o.conditioned
+    np.testing.assert_allclose(m.H[0], c.H, rtol=1e-8)
+    np.testing.assert_allclose(m.coherence[0], c.partial_coherence, rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(m.multiple_coherence[0], c.multiple_coherence, rtol=1e-8, atol=1e-12)
+    # conditioned random error: partial coherence with n_eff - q + 1 averages
+    np.testing.assert_allclose(m.random_error[0, 1], random_error(c.partial_coherence[1], ws.n_eff - 1), rtol=1e-8)
+    assert r.best is m
+    # input coherence is the batch input cross-coherence
+    np.testing.assert_allclose(r.input_coherence, coherence(ws.G, 0, 1), rtol=1e-8, atol=1e-12)
+    # one input: no conditioned set
+    est1 = OnlineSpectralEstimator(NAMES, ["u1"], ["y"], FS, BAND, window_s=1000.0, segment_s=SEG_S)
+    _feed(est1, x, [500])
+    r1 = est1.result()
+    assert r1.conditioned is None and r1.best is r1.ordinary
+
+
+@settings(max_examples=15, deadline=None)
+@given(sizes=st.lists(st.integers(1, 500), min_size=1, max_size=30), window_s=st.sampled_from([8.0, 13.3, 20.0, 31.0]))
+def test_sliding_window_equals_batch_on_the_last_segments(sizes, window_s):
+    x = _record(3000, seed=3)
+    est = OnlineSpectralEstimator(NAMES, ["u1", "u2"], ["y"], FS, BAND, window_s=window_s, segment_s=SEG_S)
+    n, hop, W = 400, 80, int(round(window_s * FS))
+    checked = []
+
+    def check(consumed):
+        r = est.result()
+        starts = _expected_starts(consumed, n, hop, W)
+        if starts.size == 0:
+            assert r is None
+            return
+        np.testing.assert_array_equal(r.segment_starts, starts)
+        # the slice holding exactly those segments; its own segmentation starts at starts[0], a
+        # multiple of the hop, so it cuts the same segments
+        ref = window_spectra(x[:, starts[0]:starts[-1] + n], NAMES, FS, SEG_S, BAND)
+        assert ref.n_segments == starts.size == r.n_segments
+        assert r.n_eff == pytest.approx(ref.n_eff, rel=1e-12)
+        assert _rel_err(r.G, ref.G) < TOL
+        checked.append(starts.size)
+
+    _feed(est, x, sizes, on_block=check)
+    assert checked and max(checked) >= int(W / hop) - 1
+
+
+def test_gaps_exclude_exactly_the_segments_plan_segments_excludes():
+    x = _record(5000, seed=5)
+    valid = np.ones(x.shape[1], bool)
+    for a, b in [(950, 960), (2000, 2001), (3100, 3500), (4990, 5000)]:
+        valid[a:b] = False
+    x = x.copy()
+    x[:, ~valid] = np.nan          # a segment that used a missing sample would turn to NaN
+    est = OnlineSpectralEstimator(NAMES, ["u1", "u2"], ["y"], FS, BAND, window_s=1000.0, segment_s=SEG_S)
+    _feed(est, x, [33, 251, 7, 499], valid=valid)
+    r = est.result()
+    plan = plan_segments(x.shape[1], 400, 0.8, valid)
+    ws = window_spectra(x, NAMES, FS, SEG_S, BAND, valid=valid)
+    np.testing.assert_array_equal(r.segment_starts, plan.starts)
+    assert r.n_excluded == plan.n_excluded == est.n_segments_excluded > 0
+    assert np.all(np.isfinite(r.G))
+    assert _rel_err(r.G, ws.G) < TOL
+    assert r.n_eff == pytest.approx(ws.n_eff, rel=1e-12)
+
+
+def test_nonfinite_samples_count_as_missing():
+    x = _record(3000)
+    x[1, 1234] = np.nan
+    valid = np.isfinite(x).all(axis=0)
+    est = OnlineSpectralEstimator(NAMES, ["u1"], ["y"], FS, BAND, window_s=1000.0, segment_s=SEG_S)
+    _feed(est, x, [100])
+    assert est.n_nonfinite_samples == 1
+    np.testing.assert_array_equal(est.result().segment_starts, plan_segments(3000, 400, 0.8, valid).starts)
+
+
+def test_cost_per_update_does_not_depend_on_window_length():
+    """Chirp-z calls and segment transforms per update are the same for a 10 s and a 1000 s window,
+    at most one chirp-z call per update, and every segment is transformed exactly once."""
+    x = _record(6000, seed=7)
+    sizes = [40, 3, 397, 120, 1, 800, 57]
+    logs = {}
+    for window_s in (10.0, 1000.0):
+        est = OnlineSpectralEstimator(NAMES, ["u1", "u2"], ["y"], FS, BAND, window_s=window_s, segment_s=SEG_S)
+        log = []
+        prev = [0, 0]
+
+        def on_block(_, est=est, log=log, prev=prev):
+            log.append((est.n_transform_calls - prev[0], est.n_segment_transforms - prev[1]))
+            prev[:] = [est.n_transform_calls, est.n_segment_transforms]
+
+        _feed(est, x, sizes, on_block=on_block)
+        logs[window_s] = log
+        assert max(c for c, _ in log) == 1
+        assert est.n_segment_transforms == plan_segments(x.shape[1], 400, 0.8).n_segments
+    assert logs[10.0] == logs[1000.0]
+
+
+def _bursty(n, seed):
+    """Signals with a 1e4 dynamic range: loud bursts that later leave the window."""
+    rng = np.random.default_rng(seed)
+    x = rng.standard_normal((2, n))
+    x[1] += 0.7 * x[0]
+    env = np.ones(n)
+    for a in range(0, n, 7919):
+        env[a:a + 60] = 1e4
+    return x * env
+
+
+@pytest.mark.parametrize("resync_every", [1000, 10**9])
+def test_drift_guard_keeps_equality_after_10000_segments(resync_every):
+    fs, n_seg, overlap = 100.0, 20, 0.5          # 0.2 s segments, hop 10 samples
+    n = 10 * 10_000 + n_seg
+    x = _bursty(n, seed=11)
+    names = ["a", "b"]
+    band = (40.0, 250.0)
+    est = OnlineSpectralEstimator(names, ["a"], ["b"], fs, band, window_s=1.0, segment_s=0.2, overlap=overlap,
+                                  resync_every=resync_every)
+    errs = []
+
+    def check(consumed):
+        if consumed < n - 3000 and consumed % 7 != 0:
+            return
+        r = est.result()
+        s = r.segment_starts
+        ref = window_spectra(x[:, s[0]:s[-1] + n_seg], names, fs, 0.2, band, overlap=overlap)
+        assert ref.n_segments == r.n_segments
+        errs.append(_rel_err(r.G, ref.G))
+
+    _feed(est, x, [37, 12, 91, 3], on_block=check)
+    assert est.n_segment_transforms >= 10_000
+    assert max(errs) < TOL, max(errs)
+    assert est.n_resyncs > 0
+
+
+def test_without_the_guard_the_running_sum_drifts(monkeypatch):
+    """The same stream with both resync rules off: the subtraction residue of the 1e4 bursts
+    exceeds the tolerance, so the previous test does exercise the guard."""
+    monkeypatch.setattr(online_mod, "DRIFT_TOLERANCE", math.inf)
+    fs, n_seg = 100.0, 20
+    n = 10 * 3000 + n_seg
+    x = _bursty(n, seed=11)
+    est = OnlineSpectralEstimator(["a", "b"], ["a"], ["b"], fs, (40.0, 250.0), window_s=1.0, segment_s=0.2,
+                                  overlap=0.5, resync_every=10**9)
+    _feed(est, x, [37, 12, 91, 3])
+    r = est.result()
+    s = r.segment_starts
+    ref = window_spectra(x[:, s[0]:s[-1] + n_seg], ["a", "b"], fs, 0.2, (40.0, 250.0), overlap=0.5)
+    assert est.n_resyncs == 0
+    assert _rel_err(r.G, ref.G) > TOL
+
+
+def test_result_none_until_first_segment_and_time():
+    est = OnlineSpectralEstimator(NAMES, ["u1"], ["y"], FS, BAND, window_s=60.0, segment_s=SEG_S)
+    x = _record(500)
+    assert est.update(x[:, :399]) == 0
+    assert est.result() is None
+    assert est.time_s == pytest.approx(399 / FS)
+    assert est.update(x[:, 399:400]) == 1
+    r = est.result()
+    assert r.n_segments == 1 and r.segment_starts.tolist() == [0]
+    assert not r.G.flags.writeable
+    assert est.update(np.empty((3, 0))) == 0
+
+
+def test_default_segment_length_rule():
+    assert default_segment_s((0.3, 20.0), 60.0) == pytest.approx(30.0)            # capped at window/2
+    assert default_segment_s((0.3, 20.0), 240.0) == pytest.approx(3 * 2 * math.pi / 0.3)
+    assert default_segment_s((1.0, 40.0), 60.0) == pytest.approx(6 * math.pi)
+    assert default_segment_s((5.0, 6.0), 100.0) == pytest.approx(20 * 2 * math.pi / 6.0)  # 20 cycles of the top
+    est = OnlineSpectralEstimator(NAMES, ["u1"], ["y"], FS, (0.3, 20.0), window_s=60.0)
+    assert est.segment_s == 30.0 and est.hop == 300
+    r_usable = 3 * 2 * math.pi / est.segment_s
+    assert r_usable == pytest.approx(0.628, abs=1e-3)
+
+
+@pytest.mark.parametrize("kwargs, words", [
+    (dict(band_rad_s=(1.0, 200.0)), "Nyquist"),
+    (dict(band_rad_s=(2.0, 1.0)), "band_rad_s"),
+    (dict(window_s=5.0, segment_s=8.0), "shorter than one segment"),
+    (dict(segment_s=0.1), "fewer than 8 samples"),
+    (dict(overlap=1.0), "overlap"),
+    (dict(outputs=["zz"]), "'zz'"),
+])
+def test_bad_settings_are_named(kwargs, words):
+    base = dict(names=NAMES, inputs=["u1"], outputs=["y"], sample_rate_hz=FS, band_rad_s=BAND, window_s=60.0)
+    base.update(kwargs)
+    with pytest.raises(ConfigError, match=words):
+        OnlineSpectralEstimator(base.pop("names"), base.pop("inputs"), base.pop("outputs"), base.pop("sample_rate_hz"),
+                                base.pop("band_rad_s"), **base)
+
+
+def test_bad_block_shape_is_named():
+    est = OnlineSpectralEstimator(NAMES, ["u1"], ["y"], FS, BAND, window_s=60.0, segment_s=SEG_S)
+    with pytest.raises(ConfigError, match=r"shape \(3, n_new\)"):
+        est.update(np.zeros((2, 10)))
+    with pytest.raises(ConfigError, match="valid"):
+        est.update(np.zeros((3, 10)), valid=np.ones(9, bool))
+
+
+def test_conditioning_before_enough_segments_is_flagged_not_raised():
+    """One segment gives a rank-1 spectral matrix: nothing to condition yet, no exception."""
+    x = _record(500)
+    est = OnlineSpectralEstimator(NAMES, ["u1", "u2"], ["y"], FS, BAND, window_s=60.0, segment_s=SEG_S)
+    est.update(x[:, :400])
+    m = est.result().conditioned
+    assert np.all(np.isnan(m.H)) and np.all(m.ill_conditioned) and np.all(np.isinf(m.random_error))
