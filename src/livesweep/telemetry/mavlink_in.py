@@ -1,0 +1,825 @@
+"""Live MAVLink input (UDP, TCP, serial) and ``.tlog`` replay as :class:`~livesweep.telemetry.frames.Source`.
+
+Both sources turn each decoded MAVLink message into a :class:`~livesweep.telemetry.frames.Frame`:
+
+* ``topic``      ``/mavlink/<MSGNAME>`` (DESIGN.md §4.1);
+* ``receive_ns`` ``time.time_ns()`` when the datagram / bytes were read (live), or the tlog
+  record's own time stamp (µs -> ns) for :class:`TlogSource`;
+* ``vehicle_ns`` :func:`~livesweep.telemetry.mavlink_codec.vehicle_time_ns` (``time_usec`` or
+  ``time_boot_ms``; ``None`` when the message has no time field);
+* ``data``       :func:`~livesweep.telemetry.mavlink_codec.record_from_message`, the canonical
+  record (``sysid``/``compid`` are fields, so several systems share one topic).
+
+Nothing is dropped silently: every byte that does not become a frame is counted in
+:attr:`MavlinkSource.counts` / :attr:`TlogSource.counts`::
+
+    received               {msgname: frames}
+    by_system              {sysid: frames}
+    bad_crc                frames whose CRC failed (corrupted on the wire)
+    bad_prefix_or_garbage  runs of bytes that cannot start a frame, incomplete frames at the
+                           end of a UDP datagram, and non-MAVLink tlog records
+    rejected_unsigned      unsigned frames refused because a signing key is set (and
+                           ``allow_unsigned`` is False)
+    unsigned_accepted      unsigned frames let through by ``allow_unsigned=True``
+    bad_signature          signed frames whose signature is wrong, or whose signing time
+                           stamp does not increase (replays), per pymavlink's check
+    bad_other              other BAD_DATA (bad incompat flags, undecodable payload)
+    unknown_message        frames with a message id the dialect does not know
+    seq_gaps               {"sysid/compid": estimated lost frames}, from the 8-bit ``seq``
+    seq_repeats            frames that repeat the previous ``seq`` of their source
+    bytes                  bytes read
+
+Signing (MAVLink 2): with ``signing_key`` set, pymavlink checks every signed frame. pymavlink
+itself rejects unsigned frames *without counting them* when no ``allow_unsigned_callback`` is
+installed (``reference/packages.md`` §1), so this module installs its own callback that counts
+them and answers ``allow_unsigned``. pymavlink also calls that callback for signed frames
+whose signature failed; those are always refused here (``allow_unsigned`` never lets a forged
+signature through) and counted in ``bad_signature`` only. Without a key, signatures are
+ignored and everything is accepted.
+
+Loss: ``seq_gaps`` is estimated per (sysid, compid) from ``msg.get_seq()`` (8 bits, wraps at
+256). **A gap that is a multiple of 256 frames is invisible**, and a burst of lost frames is
+only known modulo 256 (``reference/packages.md`` §1: pymavlink's ``mav_loss`` reported 0 for a
+true loss of 1 358). Corrupted frames (``bad_crc``) also appear as gaps. The monitor must also
+check time-stamp continuity (``vehicle_ns``) to detect loss.
+
+Files are never handed to ``mavutil.mavlink_connection``: it picks a reader from the file
+*name* (``*.bin`` -> DataFlash) and executes existing files whose path contains ``/bin/``.
+:class:`TlogSource` reads the bytes itself and feeds a bare pymavlink parser.
+"""
+
+from __future__ import annotations
+
+import collections
+import errno
+import logging
+import math
+import mmap
+import os
+import re
+import select
+import socket
+import struct
+import time
+from pathlib import Path
+from typing import Any
+
+from livesweep.errors import ConfigError, LivesweepError, LogFormatError
+from livesweep.telemetry import mavlink_codec as codec
+from livesweep.telemetry.frames import Frame
+from livesweep.telemetry.mavlink_codec import _dialect, mavutil  # imported with MAVLINK20=1
+from livesweep.telemetry.mavlink_out import parse_url
+
+__all__ = ["MavlinkSource", "TlogSource"]
+
+log = logging.getLogger(__name__)
+
+_MARKER_V1 = 0xFE
+_MARKER_V2 = 0xFD
+_SIG_LEN = _dialect.MAVLINK_SIGNATURE_BLOCK_LEN  # 13
+_IFLAG_SIGNED = _dialect.MAVLINK_IFLAG_SIGNED
+
+# tlog time stamps: plausible absolute range (2000-01-01 .. 2100-01-01, µs since the epoch)
+_TS_MIN_US = 946_684_800 * 1_000_000
+_TS_MAX_US = 4_102_444_800 * 1_000_000
+# a record time stamp more than this away from the previous one is taken for misalignment
+_TS_WINDOW_US = 24 * 3600 * 1_000_000
+# how far into a file the format check looks for the first MAVLink record
+_PROBE_BYTES = 64 * 1024
+# signing time stamps count 10 µs units since 2015-01-01
+_SIGNING_EPOCH_S = 1_420_070_400
+
+_SHORT_URL_RE = re.compile(r"^(udpin|udp|tcpin):(?::)?(\d{1,5})$")
+_NET_PREFIX_RE = re.compile(r"^(udpout|udpin|udp|tcp|tcpin):")
+_FILE_SUFFIXES = (".tlog", ".bin", ".log", ".mavlink", ".raw", ".px4log", ".ulg", ".mcap", ".elf")
+
+
+def _empty_counts() -> dict[str, Any]:
+    return {
+        "received": {},
+        "by_system": {},
+        "bad_crc": 0,
+        "bad_prefix_or_garbage": 0,
+        "rejected_unsigned": 0,
+        "unsigned_accepted": 0,
+        "bad_signature": 0,
+        "bad_other": 0,
+        "unknown_message": 0,
+        "seq_gaps": {},
+        "seq_repeats": 0,
+        "bytes": 0,
+    }
+
+
+def _check_key(signing_key: Any) -> bytes | None:
+    if signing_key is None:
+        return None
+    if not isinstance(signing_key, (bytes, bytearray)) or len(signing_key) != 32:
+        n = len(signing_key) if hasattr(signing_key, "__len__") else "?"
+        raise ConfigError(
+            "MAVLink signing key must be 32 bytes (e.g. hashlib.sha256(passphrase).digest()), "
+            f"got {type(signing_key).__name__} of length {n}"
+        )
+    return bytes(signing_key)
+
+
+class _Decoder:
+    """A bare pymavlink parser plus the counting and Frame building shared by both sources."""
+
+    def __init__(self, signing_key: bytes | None, allow_unsigned: bool, *, live: bool) -> None:
+        mav = _dialect.MAVLink(None, srcSystem=0, srcComponent=0)
+        mav.robust_parsing = True  # BAD_DATA messages instead of MAVError exceptions
+        self.mav = mav
+        self.counts = _empty_counts()
+        self._last_seq: dict[tuple[int, int], int] = {}
+        self._allow_unsigned = bool(allow_unsigned)
+        self._badsig_seen = 0
+        self._warned: set[str] = set()
+        if signing_key is not None:
+            s = mav.signing
+            s.secret_key = signing_key
+            s.sign_outgoing = False
+            s.allow_unsigned_callback = self._unsigned_callback
+            # Live: like mavutil.setup_signing, a *new* stream must not be more than one minute
+            # older than now (rejects replays of old captures). A tlog is old by nature: 0.
+            if live:
+                s.timestamp = int(max(time.time() - _SIGNING_EPOCH_S, 0) * 100_000)
+            else:
+                s.timestamp = 0
+
+    # pymavlink calls this for unsigned frames AND for signed frames whose check failed
+    # (badsig_count was incremented just before the call in that case).
+    def _unsigned_callback(self, mav: Any, msgid: int) -> bool:
+        bad = mav.signing.badsig_count
+        if bad != self._badsig_seen:
+            self._badsig_seen = bad
+            return False  # a bad signature is never accepted, not even with allow_unsigned
+        if self._allow_unsigned:
+            self.counts["unsigned_accepted"] += 1
+            return True
+        self.counts["rejected_unsigned"] += 1
+        self._warn_once("unsigned", "unsigned MAVLink frame rejected (signing key set); further ones are only counted")
+        return False
+
+    def _warn_once(self, key: str, text: str) -> None:
+        if key not in self._warned:
+            self._warned.add(key)
+            log.warning("%s", text)
+
+    def reset(self) -> int:
+        """Drop a partial frame left in the parser (end of a datagram); returns its length."""
+        mav = self.mav
+        left = len(mav.buf) - mav.buf_index
+        mav.buf = bytearray()
+        mav.buf_index = 0
+        mav.expected_length = _dialect.HEADER_LEN_V1 + 2
+        return left
+
+    def decode_frame(self, frame: bytes) -> Any:
+        """Decode one complete frame exactly as ``parse_char`` with ``robust_parsing`` would.
+
+        (What ``MAVLink.parse_char`` does for a whole frame, without its byte-buffer
+        bookkeeping, which costs about a quarter of the parse time.)
+        """
+        mav = self.mav
+        buf = bytearray(frame)
+        try:
+            if buf[0] == _MARKER_V2 and (buf[2] & ~_IFLAG_SIGNED) != 0:
+                raise _dialect.MAVError("invalid incompat_flags 0x%x 0x%x %u" % (buf[2], buf[0], len(buf)))
+            return mav.decode(buf)
+        except _dialect.MAVError as reason:
+            mav.total_receive_errors += 1
+            return _dialect.MAVLink_bad_data(buf, reason.message)
+
+    def pending_bytes(self) -> int:
+        return len(self.mav.buf) - self.mav.buf_index
+
+    def handle(self, msg: Any, receive_ns: int, out: list[Frame] | collections.deque) -> None:
+        """Count ``msg`` and append its Frame to ``out`` when it is a good message."""
+        c = self.counts
+        mtype = msg.get_type()
+        if mtype == "BAD_DATA":
+            reason = str(getattr(msg, "reason", ""))
+            if reason.startswith("invalid MAVLink CRC"):
+                c["bad_crc"] += 1
+            elif reason.startswith("Bad prefix"):
+                c["bad_prefix_or_garbage"] += 1
+            elif reason.startswith("Invalid signature"):
+                pass  # counted by the callback (rejected_unsigned) or in bad_signature
+            else:
+                c["bad_other"] += 1
+                self._warn_once("other:" + reason[:30], f"MAVLink BAD_DATA: {reason} (further ones are only counted)")
+            c["bad_signature"] = self.mav.signing.badsig_count
+            return
+        if mtype.startswith("UNKNOWN_") or msg.get_msgId() < 0:
+            c["unknown_message"] += 1
+            return
+        try:
+            rec = codec.record_from_message(msg)
+            vns = codec.vehicle_time_ns(rec, mtype)
+        except LivesweepError as e:  # a message outside the codec's dialect
+            c["unknown_message"] += 1
+            self._warn_once("conv:" + mtype, f"MAVLink {mtype}: not converted ({e}); further ones are only counted")
+            return
+        sysid, compid = rec["sysid"], rec["compid"]
+        # sequence gaps per (sysid, compid); 8-bit wrap, multiples of 256 invisible
+        key = (sysid, compid)
+        seq = msg.get_seq()
+        last = self._last_seq.get(key)
+        if last is not None:
+            gap = (seq - last - 1) & 0xFF
+            if gap == 255:
+                c["seq_repeats"] += 1
+            elif gap:
+                k = f"{sysid}/{compid}"
+                c["seq_gaps"][k] = c["seq_gaps"].get(k, 0) + gap
+        self._last_seq[key] = seq
+        rcv = c["received"]
+        rcv[mtype] = rcv.get(mtype, 0) + 1
+        bs = c["by_system"]
+        bs[sysid] = bs.get(sysid, 0) + 1
+        out.append(Frame(f"/mavlink/{mtype}", receive_ns, vns, rec))
+
+    def snapshot(self) -> dict[str, Any]:
+        c = self.counts
+        c["bad_signature"] = self.mav.signing.badsig_count
+        return {
+            k: (dict(v) if isinstance(v, dict) else v) for k, v in c.items()
+        }
+
+
+# ======================================================================================
+# Live source
+# ======================================================================================
+
+
+def _looks_like_file(url: str) -> bool:
+    if url.startswith("/dev/") or _NET_PREFIX_RE.match(url) or "://" in url:
+        return False
+    return (
+        os.sep in url
+        or "/" in url
+        or url.lower().endswith(_FILE_SUFFIXES)
+        or os.path.exists(url)
+    )
+
+
+def parse_source_url(url: str) -> dict[str, Any]:
+    """Validate a live MAVLink input url; returns ``{"kind", "host", "port"}`` or serial info.
+
+    Accepted: ``udpin:HOST:PORT`` (``udp:`` is the same), ``tcp:HOST:PORT`` (connect to a
+    server such as SITL), ``tcpin:HOST:PORT`` (listen for one client), a serial device
+    (``/dev/tty*[,BAUD]``, ``COMn[,BAUD]``). ``udpin:PORT`` / ``udpin::PORT`` (and ``tcpin:``)
+    bind 127.0.0.1; any other host must be written out (``udpin:0.0.0.0:14550`` listens on
+    all interfaces, deliberately). Port 0 on ``udpin``/``tcpin`` picks a free port. File paths
+    raise :class:`ConfigError` pointing to :class:`TlogSource`; ``udpout`` is refused (a
+    monitor receives). Validation is :func:`~livesweep.telemetry.mavlink_out.parse_url`'s.
+    """
+    if not isinstance(url, str):
+        raise ConfigError(f"MAVLink input url {url!r} is not a string")
+    m = _SHORT_URL_RE.match(url)
+    if m:
+        url = f"{m.group(1)}:127.0.0.1:{m.group(2)}"
+    if _looks_like_file(url):
+        raise ConfigError(
+            f"MAVLink input url {url!r} is a file path, not a live link: read .tlog files with "
+            "livesweep.telemetry.mavlink_in.TlogSource(path) (never via pymavlink's "
+            "mavlink_connection, which picks a reader by file name and executes paths containing /bin/)"
+        )
+    probe = url
+    zero_port = False
+    nm = re.match(r"^(udpin|udp|tcpin):(.*):0+$", url)
+    if nm:  # parse_url wants 1..65535; port 0 = "any free port" is fine for a listener
+        zero_port = True
+        probe = f"{nm.group(1)}:{nm.group(2)}:1"
+    try:
+        t = parse_url(probe)
+    except ConfigError as e:
+        raise ConfigError(str(e).replace("MAVLink output url", "MAVLink input url").replace(repr(probe), repr(url))) from None
+    if t["kind"] == "udpout":
+        raise ConfigError(
+            f"MAVLink input url {url!r}: udpout sends; a monitor receives. Use udpin:HOST:PORT "
+            "(e.g. udpin:127.0.0.1:14550) and point the vehicle's output at it"
+        )
+    if zero_port:
+        t["port"] = 0
+    return t
+
+
+class MavlinkSource:
+    """Live MAVLink frames from UDP, TCP or a serial port (implements ``frames.Source``).
+
+    Parameters
+    ----------
+    url : str
+        ``udpin:127.0.0.1:14550`` (also ``udp:``, ``tcp:``, ``tcpin:``, ``/dev/ttyUSB0,57600``);
+        see :func:`parse_source_url`. A file path raises :class:`ConfigError` (use
+        :class:`TlogSource`).
+    signing_key : bytes, optional
+        32-byte MAVLink 2 signing key. When set, unsigned frames are rejected (and counted)
+        unless ``allow_unsigned``; bad and replayed signatures are rejected and counted.
+    allow_unsigned : bool
+        Accept unsigned frames although a key is set (counted in ``unsigned_accepted``).
+    rcvbuf_bytes : int
+        ``SO_RCVBUF`` of the socket (the 212 KB Linux default loses bursts, packages.md §1).
+
+    UDP datagrams are parsed one by one; each may hold several frames, and a frame cut at the
+    end of a datagram is counted (``bad_prefix_or_garbage``) and discarded so it cannot eat
+    the next datagram's frames. See the module docstring for counters and loss caveats.
+    """
+
+    def __init__(
+        self,
+        url: str,
+        *,
+        signing_key: bytes | None = None,
+        allow_unsigned: bool = False,
+        rcvbuf_bytes: int = 4 << 20,
+    ) -> None:
+        self.url = url
+        self._target = parse_source_url(url)
+        key = _check_key(signing_key)
+        if isinstance(rcvbuf_bytes, bool) or not isinstance(rcvbuf_bytes, int) or rcvbuf_bytes <= 0:
+            raise ConfigError(f"rcvbuf_bytes {rcvbuf_bytes!r} must be a positive integer")
+        self._dec = _Decoder(key, allow_unsigned, live=True)
+        self._pending: collections.deque[Frame] = collections.deque()
+        self._closed = False
+        self._client: socket.socket | None = None  # tcpin: the accepted client
+        self._eof = False
+        self.link_events = 0  # tcp: disconnects seen; tcpin: clients accepted/lost
+
+        codec.ensure_mavlink2()
+        t = self._target
+        kind = t["kind"]
+        try:
+            if kind == "serial":
+                conn = mavutil.mavlink_connection(t["device"], baud=t["baud"])
+            else:
+                extra: dict[str, Any] = {"retries": 1} if kind in ("tcp", "tcpin") else {}
+                conn = mavutil.mavlink_connection(f"{kind}:{t['host']}:{t['port']}", **extra)
+        except ModuleNotFoundError as e:
+            raise LivesweepError(f"MAVLink input {url!r} needs the {e.name!r} package (pip install pyserial)") from None
+        except (OSError, ValueError) as e:
+            raise LivesweepError(f"MAVLink input {url!r} cannot be opened: {e}") from None
+        self._conn = conn
+        self._kind = kind
+        for s in (getattr(conn, "port", None), getattr(conn, "listen", None)):
+            if isinstance(s, socket.socket):
+                try:
+                    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf_bytes)
+                except OSError:  # pragma: no cover - best effort
+                    pass
+        self._rcvbuf = rcvbuf_bytes
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def connection(self) -> Any:
+        """The pymavlink connection (its ``port`` / ``listen`` socket; do not read from it)."""
+        return self._conn
+
+    @property
+    def local_address(self) -> tuple[str, int] | None:
+        """(host, port) the socket is bound to (network links), e.g. after binding port 0."""
+        s = getattr(self._conn, "listen", None) if self._kind == "tcpin" else getattr(self._conn, "port", None)
+        if isinstance(s, socket.socket):
+            return s.getsockname()[:2]
+        return None
+
+    @property
+    def counts(self) -> dict:
+        c = self._dec.snapshot()
+        return c
+
+    @property
+    def finished(self) -> bool:
+        return False
+
+    # ------------------------------------------------------------------ reading
+    def _fd(self) -> Any:
+        k = self._kind
+        if k in ("udpin", "tcp"):
+            return self._conn.port
+        if k == "tcpin":
+            return self._client if self._client is not None else self._conn.listen
+        return self._conn.fd
+
+    def _read_once(self, out: collections.deque) -> bool:
+        """Read one datagram / chunk and decode it into ``out``; False when nothing was there."""
+        dec = self._dec
+        k = self._kind
+        if k == "udpin":
+            try:
+                data, addr = self._conn.port.recvfrom(65535)
+            except (BlockingIOError, InterruptedError):
+                return False
+            except OSError as e:
+                if e.errno == errno.ECONNREFUSED:
+                    return False
+                raise LivesweepError(f"MAVLink input {self.url!r}: recvfrom failed ({e})") from None
+            now = time.time_ns()
+            dec.counts["bytes"] += len(data)
+            self._conn.clients.add(addr)
+            msgs = dec.mav.parse_buffer(data) or ()
+            for m in msgs:
+                dec.handle(m, now, out)
+            if dec.pending_bytes():  # a frame cut at the end of the datagram
+                dec.reset()
+                dec.counts["bad_prefix_or_garbage"] += 1
+            return True
+        if k in ("tcp", "tcpin"):
+            sock = self._conn.port if k == "tcp" else self._client
+            if k == "tcpin" and sock is None:
+                try:
+                    sock, _addr = self._conn.listen.accept()
+                except (BlockingIOError, InterruptedError):
+                    return False
+                except OSError:
+                    return False
+                sock.setblocking(False)
+                try:
+                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, self._rcvbuf)
+                except OSError:  # pragma: no cover
+                    pass
+                self._client = sock
+                self.link_events += 1
+                return True
+            if sock is None or self._eof:
+                return False
+            try:
+                data = sock.recv(65536)
+            except (BlockingIOError, InterruptedError):
+                return False
+            except OSError as e:
+                data = b""
+                log.warning("MAVLink input %s: connection error (%s)", self.url, e)
+            if not data:  # peer closed
+                self.link_events += 1
+                if k == "tcpin":
+                    log.warning("MAVLink input %s: TCP client disconnected; waiting for a new one", self.url)
+                    try:
+                        sock.close()
+                    finally:
+                        self._client = None
+                    dec.reset()
+                else:
+                    log.warning("MAVLink input %s: TCP server closed the connection", self.url)
+                    self._eof = True
+                return False
+        else:  # serial
+            data = self._conn.recv(65536)
+            if not data:
+                return False
+        now = time.time_ns()
+        dec.counts["bytes"] += len(data)
+        for m in dec.mav.parse_buffer(data) or ():
+            dec.handle(m, now, out)
+        return True
+
+    def _drain(self, out: list[Frame], max_frames: int) -> None:
+        pend = self._pending
+        while pend and len(out) < max_frames:
+            out.append(pend.popleft())
+        while len(out) < max_frames:
+            if not self._read_once(pend):
+                break
+            while pend and len(out) < max_frames:
+                out.append(pend.popleft())
+
+    def poll(self, timeout_s: float = 0.05, max_frames: int = 10_000) -> list[Frame]:
+        """Everything received since the last call (at most ``max_frames``; the rest is kept).
+
+        Does not block while data is available; waits up to ``timeout_s`` only when nothing
+        is there.
+        """
+        if self._closed:
+            raise LivesweepError(f"MAVLink input {self.url!r} is closed")
+        out: list[Frame] = []
+        self._drain(out, max_frames)
+        if out or timeout_s is None or timeout_s <= 0:
+            return out
+        deadline = time.monotonic() + float(timeout_s)
+        while not out:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                break
+            fd = self._fd()
+            if self._eof or fd is None:
+                time.sleep(left)
+                break
+            try:
+                select.select([fd], [], [], left)
+            except (OSError, ValueError):  # pragma: no cover - fd closed underneath
+                break
+            self._drain(out, max_frames)
+        return out
+
+    def close(self) -> None:
+        """Close the link (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._client is not None:
+            try:
+                self._client.close()
+            except OSError:  # pragma: no cover
+                pass
+            self._client = None
+        try:
+            self._conn.close()
+        except (OSError, AttributeError):  # pragma: no cover
+            pass
+
+    def __enter__(self) -> "MavlinkSource":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"MavlinkSource({self.url!r}, received={sum(self._dec.counts['received'].values())})"
+
+
+# ======================================================================================
+# tlog replay
+# ======================================================================================
+
+
+def _frame_len(d: Any, i: int, n: int) -> int | None:
+    """Length of the MAVLink frame whose magic byte is at ``d[i]``; None if the header is cut."""
+    marker = d[i]
+    if marker == _MARKER_V1:
+        if i + 2 > n:
+            return None
+        return d[i + 1] + 8
+    if i + 3 > n:
+        return None
+    ln = d[i + 1] + 12
+    if d[i + 2] & _IFLAG_SIGNED:
+        ln += _SIG_LEN
+    return ln
+
+
+class TlogSource:
+    """Frames from a ``.tlog`` file: ``[uint64 big-endian µs time][raw MAVLink frame]`` repeated.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file. It is opened by *content*: the first 8 bytes must be a plausible UNIX time
+        in µs (2000..2100) and a record ``[time][0xFD|0xFE ...]`` must follow within the
+        first 64 KiB, else :class:`LogFormatError` naming the file. (Strictly the first
+        record should be a MAVLink frame, but real logs such as ArduPilot's autotest tlog
+        start with non-MAVLink records: console text logged one byte per record.)
+    speed : float
+        0 or inf: as fast as possible (each :meth:`poll` returns up to ``max_frames``).
+        Otherwise frames are released when ``(t_record - t_first) / speed`` of wall time has
+        passed since the first poll.
+    signing_key : bytes, optional
+        Verify MAVLink 2 signatures (unsigned frames are then rejected and counted).
+
+    ``receive_ns`` of each frame is the record's time stamp (µs -> ns). Records are decoded
+    one at a time with a fresh parser state, so a bad record never swallows the next one.
+    A time stamp that is implausible (not within a day of the previous one) means the
+    reader lost alignment (a corrupted length, or a non-MAVLink record of unknown length):
+    it scans forward byte by byte to the next plausible time stamp and counts what it
+    skipped (``bad_prefix_or_garbage`` once per skipped run, ``garbage_bytes``). A cut last
+    record is counted in ``truncated_tail`` with one warning. Extra counters:
+    ``records`` (tlog records with a MAVLink frame), ``garbage_bytes``, ``truncated_tail``.
+    """
+
+    def __init__(self, path: str | os.PathLike, *, speed: float = 0, signing_key: bytes | None = None) -> None:
+        self.path = Path(path)
+        try:
+            s = float(speed)
+        except (TypeError, ValueError):
+            raise ConfigError(f"tlog replay speed {speed!r} is not a number") from None
+        if math.isnan(s) or s < 0:
+            raise ConfigError(f"tlog replay speed {speed!r} must be > 0 (or 0/inf for as fast as possible)")
+        self.speed = s
+        self._paced = s != 0 and not math.isinf(s)
+        key = _check_key(signing_key)
+        self._dec = _Decoder(key, False, live=False)
+        self._dec.counts.update({"records": 0, "garbage_bytes": 0, "truncated_tail": 0})
+        self._pending: collections.deque[Frame] = collections.deque()
+        self._closed = False
+        self._pos = 0
+        self._last_ts: int | None = None
+        self._resync_from: int | None = None  # after a bad frame: rescan from its marker + 1
+        self._done = False
+        self._t0_wall: float | None = None
+        self._t0_ns: int | None = None
+
+        try:
+            f = open(self.path, "rb")
+        except OSError as e:
+            raise LogFormatError(f"tlog {str(self.path)!r} cannot be opened: {e.strerror or e}") from None
+        self._f = f
+        try:
+            size = os.fstat(f.fileno()).st_size
+            if size == 0:
+                raise LogFormatError(f"{str(self.path)!r} is empty, not a MAVLink tlog")
+            self._map: Any = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
+            self._n = len(self._map)
+            self._check_format()
+        except BaseException:
+            self._release()
+            raise
+
+    # ------------------------------------------------------------------ format
+    def _check_format(self) -> None:
+        d, n = self._map, self._n
+        name = str(self.path)
+        if n < 8 + 8:
+            raise LogFormatError(f"{name!r} is too short ({n} bytes) to be a MAVLink tlog")
+        (ts0,) = struct.unpack_from(">Q", d, 0)
+        if not _TS_MIN_US <= ts0 <= _TS_MAX_US:
+            raise LogFormatError(
+                f"{name!r} is not a MAVLink tlog: its first 8 bytes are not a plausible big-endian "
+                f"µs UNIX time (got {bytes(d[:8]).hex()}); a tlog is [uint64 BE µs][MAVLink frame] repeated"
+            )
+        lim = min(n - 9, _PROBE_BYTES)
+        for q in range(0, lim + 1):
+            if d[q + 8] in (_MARKER_V1, _MARKER_V2):
+                (ts,) = struct.unpack_from(">Q", d, q)
+                if abs(ts - ts0) <= _TS_WINDOW_US:
+                    return
+        raise LogFormatError(
+            f"{name!r} is not a MAVLink tlog: no [µs time][0xFD/0xFE frame] record in its first "
+            f"{lim + 9} bytes"
+        )
+
+    # ------------------------------------------------------------------ decoding
+    def _plausible(self, ts: int) -> bool:
+        last = self._last_ts
+        if last is None:
+            return _TS_MIN_US <= ts <= _TS_MAX_US
+        return abs(ts - last) <= _TS_WINDOW_US
+
+    def _resync(self, start: int) -> int:
+        """First offset >= start where a plausible record begins (or the end of the data)."""
+        d, n = self._map, self._n
+        q = start
+        unpack = struct.unpack_from
+        while q + 8 <= n:
+            (ts,) = unpack(">Q", d, q)
+            if self._plausible(ts):
+                return q
+            # a session appended after a long break: absolute-plausible time, a frame start,
+            # and the record after that frame close in time
+            if _TS_MIN_US <= ts <= _TS_MAX_US and q + 8 < n and d[q + 8] in (_MARKER_V1, _MARKER_V2):
+                ln = _frame_len(d, q + 8, n)
+                if ln is not None:
+                    nxt = q + 8 + ln
+                    if nxt >= n or (nxt + 8 <= n and abs(unpack(">Q", d, nxt)[0] - ts) <= _TS_WINDOW_US):
+                        self._last_ts = ts
+                        return q
+            q += 1
+        return n
+
+    def _skip(self, frm: int, to: int) -> None:
+        c = self._dec.counts
+        c["bad_prefix_or_garbage"] += 1
+        c["garbage_bytes"] += to - frm
+        self._dec._warn_once("tlog-garbage", f"tlog {str(self.path)!r}: skipped non-MAVLink bytes at offset {frm} "
+                                             "(further skips are only counted)")
+
+    def _truncated(self, at: int) -> None:
+        c = self._dec.counts
+        c["truncated_tail"] += 1
+        c["garbage_bytes"] += self._n - at
+        log.warning("tlog %r: last record is cut (%d bytes at offset %d ignored)", str(self.path), self._n - at, at)
+
+    def _decode(self, limit: int) -> None:
+        """Decode records into the pending queue until ``limit`` frames are pending or the end."""
+        d, n = self._map, self._n
+        dec = self._dec
+        counts = dec.counts
+        pend = self._pending
+        unpack = struct.unpack_from
+        p = self._pos
+        while len(pend) < limit:
+            if p >= n:
+                self._done = True
+                break
+            if p + 8 > n:
+                self._truncated(p)
+                p = n
+                continue
+            (ts,) = unpack(">Q", d, p)
+            if not self._plausible(ts):
+                start = self._resync_from if self._resync_from is not None else p + 1
+                self._resync_from = None
+                q = self._resync(max(start, 1))
+                self._skip(start if start < p else p, q)
+                p = q
+                continue
+            self._resync_from = None
+            i = p + 8
+            if i >= n:
+                self._truncated(p)
+                p = n
+                continue
+            marker = d[i]
+            if marker != _MARKER_V1 and marker != _MARKER_V2:
+                # a record that is not a MAVLink frame (its length is unknown)
+                self._last_ts = ts
+                q = self._resync(i + 1)
+                self._skip(i, q)
+                p = q
+                continue
+            ln = _frame_len(d, i, n)
+            if ln is None or i + ln > n:
+                q = self._resync(i + 1)
+                if q < n:  # a record follows: this frame's length byte is corrupt
+                    self._skip(i, q)
+                    p = q
+                    continue
+                self._truncated(p)
+                p = n
+                continue
+            frame = d[i : i + ln]
+            counts["bytes"] += ln
+            counts["records"] += 1
+            self._last_ts = ts
+            msg = dec.decode_frame(frame)
+            if msg.get_type() == "BAD_DATA" and str(getattr(msg, "reason", "")).startswith("invalid MAVLink CRC"):
+                self._resync_from = i + 1  # the length byte itself may be what is corrupted
+            dec.handle(msg, ts * 1000, pend)
+            p = i + ln
+        self._pos = p
+
+    # ------------------------------------------------------------------ Source API
+    @property
+    def counts(self) -> dict:
+        return self._dec.snapshot()
+
+    @property
+    def finished(self) -> bool:
+        return self._closed or (self._done and not self._pending)
+
+    def poll(self, timeout_s: float = 0.05, max_frames: int = 10_000) -> list[Frame]:
+        """The next frames: up to ``max_frames`` (unpaced), or those due by now (paced)."""
+        if self._closed:
+            raise LivesweepError(f"tlog {str(self.path)!r} is closed")
+        out: list[Frame] = []
+        if max_frames <= 0:
+            return out
+        if not self._paced:
+            if len(self._pending) < max_frames and not self._done:
+                self._decode(max_frames)
+            pend = self._pending
+            while pend and len(out) < max_frames:
+                out.append(pend.popleft())
+            return out
+        deadline = time.monotonic() + max(float(timeout_s or 0.0), 0.0)
+        pend = self._pending
+        while True:
+            if not pend and not self._done:
+                self._decode(min(max_frames, 1024))
+            if not pend:
+                return out  # end of the log
+            now = time.monotonic()
+            if self._t0_wall is None:  # the first poll starts the replay clock
+                self._t0_wall, self._t0_ns = now, pend[0].receive_ns
+            while pend and len(out) < max_frames and self._due(pend[0]) <= now:
+                out.append(pend.popleft())
+                if not pend and not self._done:
+                    self._decode(min(max_frames, 1024))
+            if out or not pend:
+                return out
+            # nothing due yet: sleep until the next frame is due, at most until the deadline
+            if now >= deadline:
+                return out
+            time.sleep(max(min(self._due(pend[0]), deadline) - now, 0.0))
+
+    def _due(self, frame: Frame) -> float:
+        """Wall time (monotonic) at which a paced replay releases ``frame``."""
+        return self._t0_wall + (frame.receive_ns - self._t0_ns) / 1e9 / self.speed
+
+    def _release(self) -> None:
+        m = getattr(self, "_map", None)
+        if m is not None:
+            try:
+                m.close()
+            except (BufferError, ValueError):  # pragma: no cover
+                pass
+            self._map = None
+        f = getattr(self, "_f", None)
+        if f is not None:
+            f.close()
+
+    def close(self) -> None:
+        """Release the file (idempotent)."""
+        if not self._closed:
+            self._closed = True
+            self._pending.clear()
+            self._release()
+
+    def __enter__(self) -> "TlogSource":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"TlogSource({str(self.path)!r}, speed={self.speed})"
