@@ -1,7 +1,8 @@
 """The ``livesweep`` command.
 
-Verbs so far: ``sim`` (simulate a test point to MCAP and/or live MAVLink), ``identify`` (frequency
-responses from a case file) and ``demo`` (the one command a newcomer runs first). Bad input prints one line ``livesweep: error: ...`` and exits 2.
+Verbs: ``sim`` (simulate a test point to MCAP and/or live MAVLink), ``monitor`` (live sweep
+monitor), ``replay`` (the monitor over a recording), ``identify`` (frequency responses from a case
+file) and ``demo`` (the one command a newcomer runs first). Bad input prints one line ``livesweep: error: ...`` and exits 2.
 """
 
 from __future__ import annotations
@@ -198,6 +199,137 @@ def cmd_identify(args) -> int:
     return 0
 
 
+def _monitor_settings(args):
+    """Channel map and spectral settings from --case (or the packaged XV-15 map) plus CLI overrides."""
+    from livesweep.config import load_channel_map
+    from livesweep.monitor.pipeline import MonitorSettings
+
+    path = args.case or str(Path(__file__).resolve().parent / "data" / "xv15_channels.toml")
+    signals, spectral = load_channel_map(path)
+    if spectral is None:
+        raise ConfigError(f"{path}: the monitor needs a [spectral] table (inputs, outputs, band_rad_s, sample_rate_hz)")
+    for name, value in (("--window", args.window), ("--update-period", args.update_period)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise ConfigError(f"{name} must be > 0, got {value!r}")
+    return MonitorSettings(
+        signals=signals, inputs=tuple(spectral.inputs), outputs=tuple(spectral.outputs),
+        band_rad_s=tuple(spectral.band_rad_s), sample_rate_hz=spectral.sample_rate_hz,
+        window_s=args.window or 120.0, update_period_s=args.update_period or 0.2,
+        required_pairs=_required_pairs(args.require, spectral),
+    )
+
+
+def _required_pairs(items, spectral):
+    if not items:
+        return None
+    pairs = []
+    for item in items:
+        out, sep, inp = item.partition("/")
+        if not sep or out not in spectral.outputs or inp not in spectral.inputs:
+            raise ConfigError(f"--require {item!r}: give OUTPUT/INPUT with an output of {list(spectral.outputs)} "
+                              f"and an input of {list(spectral.inputs)}")
+        pairs.append((out, inp))
+    return tuple(pairs)
+
+
+def _view(args, settings, name):
+    if not (args.rerun_save or args.rerun_spawn or args.rerun_serve):
+        return None
+    from livesweep.monitor.rerun_view import RerunView
+
+    return RerunView(list(settings.inputs), list(settings.outputs), recording_id=name,
+                     save_path=args.rerun_save, spawn=args.rerun_spawn, serve=args.rerun_serve,
+                     bind_host=args.rerun_bind)
+
+
+def _print_monitor_summary(summary: dict, out=sys.stdout) -> None:
+    print(f"monitor: {summary['frames']} frames, {summary['estimates']} estimates over {summary['data_s'] or 0:.1f} s "
+          f"of data in {summary['wall_s']:.1f} s", file=out)
+    al = summary["aligner"]
+    issues = {k: v for k, v in al.items() if k in ("missing_field", "not_a_number", "late_dropped", "reordered",
+                                                   "wraps", "resets", "samples_invalid") and v}
+    if issues:
+        print(f"  repairs and gaps: {issues}", file=out)
+    for a in summary["adequacy"]:
+        band = "-" if a["band"] is None else "%.2f .. %.2f rad/s" % tuple(a["band"])
+        print(f"  {a['output'] + '/' + a['input']:12s} adequate over {100 * a['fraction']:3.0f}% of the band ({band})", file=out)
+    if summary["verdict"]:
+        print(f"  verdict: {summary['verdict']}" + (f" ({'; '.join(summary['reasons'])})" if summary["reasons"] else ""),
+              file=out)
+    if summary.get("recorded"):
+        print(f"  recorded {sum(summary['recorded'].values())} messages", file=out)
+
+
+def cmd_monitor(args) -> int:
+    """Live monitor: MAVLink and/or Zenoh in, estimates to Rerun/Zenoh, everything to MCAP."""
+    from livesweep.monitor.pipeline import MonitorPipeline
+    from livesweep.telemetry.recorder import McapRecorder
+
+    if not args.mavlink and not args.zenoh:
+        raise ConfigError("give --mavlink URL (e.g. udpin:127.0.0.1:14550) and/or --zenoh KEYEXPR")
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise ConfigError(f"--duration must be > 0 seconds, got {args.duration!r}")
+    settings = _monitor_settings(args)
+    if args.record:
+        _check_out_path(args.record)
+    sources, publisher = [], None
+    try:
+        for url in args.mavlink or []:
+            from livesweep.telemetry.mavlink_in import MavlinkSource
+
+            key = Path(args.signing_key_file).read_bytes() if args.signing_key_file else None
+            sources.append(MavlinkSource(url, signing_key=key))
+        if args.zenoh:
+            from livesweep.telemetry.zenoh_io import ZenohPublisher, ZenohSource, zenoh_config
+
+            cfg = zenoh_config(config_path=args.zenoh_config) if args.zenoh_config else None
+            sources.append(ZenohSource(args.zenoh, config=cfg, listen_port=args.zenoh_listen))
+            if args.zenoh_publish:
+                publisher = ZenohPublisher(config=cfg, connect_port=args.zenoh_listen)
+        recorder = McapRecorder(args.record, settings=settings.to_dict(),
+                                metadata={"test_point": {"source": "livesweep monitor"}}) if args.record else None
+        view = _view(args, settings, "live")
+    except BaseException:
+        for src in sources:
+            src.close()
+        raise
+    pipe = MonitorPipeline(settings, sources, recorder=recorder, view=view, publisher=publisher)
+    try:
+        summary = pipe.run(duration_s=args.duration)
+    except KeyboardInterrupt:
+        summary = pipe.summary()
+    _print_monitor_summary(summary)
+    if args.record:
+        print(f"wrote {args.record}")
+    return 0
+
+
+def cmd_replay(args) -> int:
+    """Run the monitor pipeline over a recorded MCAP log."""
+    from livesweep.monitor.pipeline import MonitorPipeline
+    from livesweep.telemetry.replay import McapReplaySource
+
+    if not Path(args.log).is_file():
+        raise ConfigError(f"log {args.log!r} does not exist")
+    settings = _monitor_settings(args)
+    pipe = MonitorPipeline(settings, [McapReplaySource(args.log, speed=args.speed or 0.0)],
+                           view=_view(args, settings, "replay"))
+    _print_monitor_summary(pipe.run())
+    return 0
+
+
+def _add_monitor_options(m) -> None:
+    m.add_argument("--case", help="case file or channel map ([signals] and [spectral]); default: the XV-15 map")
+    m.add_argument("--window", type=_positive_float, help="sliding window [s] (default 120)")
+    m.add_argument("--update-period", type=_positive_float, help="estimate every this many seconds of data (default 0.2)")
+    m.add_argument("--rerun-save", metavar="FILE.rrd", help="write the Rerun recording to a file (headless)")
+    m.add_argument("--rerun-spawn", action="store_true", help="open the Rerun desktop viewer")
+    m.add_argument("--rerun-serve", action="store_true", help="serve the Rerun web viewer")
+    m.add_argument("--rerun-bind", default="127.0.0.1", help="address the Rerun web viewer binds (default 127.0.0.1)")
+    m.add_argument("--require", action="append", metavar="OUT/IN",
+                   help="pair this test point must excite for a GO, e.g. p/da (repeatable; default: on-axis pairs)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="livesweep", description="Frequency-sweep monitoring and system identification.")
     p.add_argument("--version", action="version", version=f"livesweep {__version__}")
@@ -223,6 +355,24 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--mavlink", help="stream MAVLink 2 to a pymavlink URL, e.g. udpout:127.0.0.1:14550")
     s.add_argument("--speed", type=_positive_float, default=1.0, help="stream pace: 1 = real time, 10 = ten times faster")
     s.set_defaults(func=cmd_sim)
+
+    m = sub.add_parser("monitor", help="live sweep monitor: MAVLink/Zenoh in, coherence and adequacy in Rerun, MCAP recording")
+    m.add_argument("--mavlink", action="append", metavar="URL", help="pymavlink connection, e.g. udpin:127.0.0.1:14550")
+    m.add_argument("--signing-key-file", help="32-byte MAVLink 2 signing key: unsigned and forged packets are rejected")
+    m.add_argument("--zenoh", metavar="KEYEXPR", help="subscribe to a Zenoh key expression (JSON payloads)")
+    m.add_argument("--zenoh-config", help="Zenoh JSON5 config for real deployments (routers, TLS)")
+    m.add_argument("--zenoh-listen", type=int, help="Zenoh TCP port on 127.0.0.1 (default: no listener)")
+    m.add_argument("--zenoh-publish", action="store_true", help="publish live results under livesweep/...")
+    m.add_argument("--record", metavar="FILE.mcap", help="record every message and the live results")
+    m.add_argument("--duration", type=_positive_float, help="stop after this many seconds (default: Ctrl-C)")
+    _add_monitor_options(m)
+    m.set_defaults(func=cmd_monitor)
+
+    r = sub.add_parser("replay", help="run the monitor pipeline over an MCAP recording")
+    r.add_argument("log", help="MCAP log")
+    r.add_argument("--speed", type=_positive_float, default=0.0, help="N x real time (default: as fast as possible)")
+    _add_monitor_options(r)
+    r.set_defaults(func=cmd_replay)
 
     i = sub.add_parser("identify", help="identify from a case file (DESIGN.md §4.2) and write report.json, report.html, plots")
     i.add_argument("case", help="case file (TOML)")

@@ -1,0 +1,278 @@
+"""The live monitor end to end with real components: simulator -> UDP -> monitor -> MCAP + .rrd,
+replay of its own recording, Zenoh into the monitor, a third-party tlog, a killed recorder."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+from rerun.chunk import RrdReader
+
+from livesweep.config import load_channel_map
+from livesweep.monitor.blueprint import coherence_path, telemetry_path
+from livesweep.monitor.pipeline import MonitorPipeline, MonitorSettings
+from livesweep.monitor.rerun_view import RerunView
+from livesweep.sim.scenario import simulate, sweep_scenario
+from livesweep.telemetry.mavlink_in import MavlinkSource, TlogSource
+from livesweep.telemetry.mavlink_out import MavlinkSender, stream_records
+from livesweep.telemetry.mcap_log import read_summary
+from livesweep.telemetry.recorder import McapRecorder
+from livesweep.telemetry.replay import McapReplaySource
+from livesweep.telemetry.sim_telemetry import mavlink_timeline
+
+ROOT = Path(__file__).resolve().parents[1]
+SIGNALS, _ = load_channel_map(ROOT / "config" / "xv15_channels.toml")
+SETTINGS = MonitorSettings(signals=SIGNALS, inputs=("da", "dr"), outputs=("p", "r", "ay"), band_rad_s=(1.0, 20.0),
+                           sample_rate_hz=50.0, window_s=60.0, segment_s=20.0, update_period_s=0.2, results_every=1,
+                           required_pairs=(("p", "da"),))
+
+
+def shared_data():
+    for base in (ROOT.parent / "shared" / "data", Path("/work/shared/data")):
+        if base.is_dir():
+            return base
+    pytest.skip("../shared/data is absent")
+
+
+def sim_records(seed=4, duration_s=45.0):
+    res = simulate(sweep_scenario("xv15-cruise", axes=("da",), repeats=1, omega_min_rad_s=0.5, omega_max_rad_s=20.0,
+                                  duration_s=duration_s, amplitudes={"da": 3.0}, off_axis_rms=0.3, seed=seed))
+    recs, _ = mavlink_timeline(res)
+    recs.sort(key=lambda r: (r.vehicle_time_ns, r.msgname))
+    return [(r.vehicle_time_ns * 1e-9, r.msgname, r.record) for r in recs if r.msgname != "HEARTBEAT"]
+
+
+def run_live(tmp_path, speed=10.0):
+    """Simulator streams MAVLink 2 over UDP loopback into the monitor, which records and writes an .rrd."""
+    src = MavlinkSource("udpin:127.0.0.1:0")
+    port = src.local_address[1]
+    items = sim_records()
+    done, sent = threading.Event(), {}
+
+    def send():
+        tx = MavlinkSender(f"udpout:127.0.0.1:{port}")
+        try:
+            sent.update(stream_records(tx, items, speed=speed)["counts"])
+        finally:
+            tx.close()
+            done.set()
+
+    rec = McapRecorder(tmp_path / "live.mcap", settings=SETTINGS.to_dict())
+    view = RerunView(list(SETTINGS.inputs), list(SETTINGS.outputs), recording_id="live", save_path=tmp_path / "live.rrd")
+    pipe = MonitorPipeline(SETTINGS, [src], recorder=rec, view=view)
+    quiet_since = []
+
+    def stop():
+        if not done.is_set():
+            return False
+        quiet_since.append(time.monotonic())
+        return time.monotonic() - quiet_since[0] > 1.0
+
+    th = threading.Thread(target=send)
+    th.start()
+    summary = pipe.run(stop=stop, duration_s=120)
+    th.join(10)
+    return pipe, summary, sent
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("live")
+    pipe, summary, sent = run_live(tmp)
+    return tmp, pipe, summary, sent
+
+
+def test_every_message_sent_is_received_and_recorded(live):
+    tmp, pipe, summary, sent = live
+    n_sent = sum(sent.values())
+    assert n_sent > 10_000
+    assert summary["frames"] == n_sent
+    s = read_summary(tmp / "live.mcap")
+    assert s.complete
+    mav = {k: v for k, v in s.message_counts.items() if k.startswith("/mavlink/")}
+    assert {k.split("/")[-1]: v for k, v in mav.items()} == sent
+    assert s.message_counts["/livesweep/estimate"] == summary["estimates"] > 100
+    assert summary["aligner"]["samples_invalid"] == 0 and summary["aligner"]["late_dropped"] == 0
+
+
+def test_live_verdict_and_adequacy_for_the_roll_sweep(live):
+    _, pipe, summary, _ = live
+    assert summary["verdict"] == "GO"
+    p_da = next(a for a in summary["adequacy"] if a["output"] == "p" and a["input"] == "da")
+    assert p_da["fraction"] > 0.6
+    last = pipe.estimates[-1]
+    assert last.conditioned and last.coherence.shape == (3, 2, last.omega.size)
+
+
+def test_replay_of_the_recording_reproduces_the_live_estimates(live):
+    tmp, pipe, _, _ = live
+    replay = MonitorPipeline(SETTINGS, [McapReplaySource(tmp / "live.mcap")])
+    replay.run()
+    live_est = {round(e.t_s, 6): e for e in pipe.estimates}
+    rep_est = {round(e.t_s, 6): e for e in replay.estimates}
+    assert set(live_est) == set(rep_est)
+    worst = max(np.nanmax(np.abs(live_est[t].coherence - rep_est[t].coherence)) for t in live_est)
+    assert worst <= 1e-9
+    assert [e.status.verdict for e in pipe.estimates] == [e.status.verdict for e in replay.estimates]
+
+
+def test_recorded_results_equal_the_live_ones(live):
+    tmp, pipe, _, _ = live
+    from livesweep.telemetry.mcap_log import read_messages
+
+    recorded = [m.data for m in read_messages(tmp / "live.mcap", topics="/livesweep/estimate")]
+    by_t = {round(e.t_s, 6): e for e in pipe.estimates}
+    for r in recorded[::20]:
+        e = by_t[round(r["t_s"], 6)]
+        np.testing.assert_array_equal(np.array(r["coherence"]["p/da"], float), e.coherence[0, 0])
+
+
+def test_rrd_holds_the_time_series_and_the_coherence(live):
+    tmp, pipe, _, _ = live
+    chunks = RrdReader(tmp / "live.rrd").stream().to_chunks()
+    paths = {c.entity_path for c in chunks}
+    assert "/" + telemetry_path("input", "da") in paths and "/" + telemetry_path("output", "p") in paths
+    rows = []
+    for c in chunks:
+        if c.entity_path == "/" + coherence_path("p", "da"):
+            rb = c.to_record_batch()
+            for col in rb.schema.names:
+                if col.endswith(":values"):
+                    times = rb.column("flight_time").cast(pa.int64()).to_pylist()
+                    vals = [v[0]["buffer"] if isinstance(v[0], dict) else v for v in rb.column(col).to_pylist()]
+                    rows += list(zip(times, vals))
+    assert rows
+    t_last, coh = max(rows, key=lambda r: r[0])
+    e = min(pipe.estimates, key=lambda e: abs(e.t_s * 1e9 - t_last))
+    np.testing.assert_allclose(coh, e.coherence[0, 0], rtol=1e-6, atol=1e-9)
+
+
+def test_zenoh_json_samples_feed_the_monitor(tmp_path):
+    import socket
+
+    import zenoh
+
+    from livesweep.config import SignalSpec
+    from livesweep.telemetry.zenoh_io import ZenohSource, zenoh_config
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    items = [(t, m, r) for t, m, r in sim_records(seed=6, duration_s=30.0) if m in ("SERVO_OUTPUT_RAW", "HIGHRES_IMU")]
+    src = ZenohSource("vehicle/**", listen_port=port)
+    pub = zenoh.open(zenoh_config(connect=[f"tcp/127.0.0.1:{port}"]))
+    try:
+        time.sleep(0.5)
+        n = 0
+        blocks = {}
+        for t, m, r in items:               # blocks of 20 samples per key and put, as telemetry gateways do
+            block = blocks.setdefault(m, [])
+            block.append(r)
+            if len(block) == 20:
+                pub.put(f"vehicle/{m.lower()}", json.dumps(block))
+                n += len(block)
+                block.clear()
+        sigs = {k: SignalSpec(name=k, topic=f"/zenoh/vehicle/{SIGNALS[k].topic.split('/')[-1].lower()}",
+                              field=SIGNALS[k].field, stamp=SIGNALS[k].stamp, stamp_scale=SIGNALS[k].stamp_scale,
+                              scale=SIGNALS[k].scale, offset=SIGNALS[k].offset) for k in ("da", "p", "r")}
+        st = MonitorSettings(signals=sigs, inputs=("da",), outputs=("p", "r"), band_rad_s=(1.0, 20.0), window_s=30.0,
+                             segment_s=10.0)
+        pipe = MonitorPipeline(st, [src])
+        t_end = time.monotonic() + 20
+        pipe.run(stop=lambda: pipe.totals.frames >= n or time.monotonic() > t_end)
+    finally:
+        pub.close()
+    assert pipe.totals.frames == n
+    assert pipe.estimates and pipe.aligner.counts["samples_invalid"] == 0
+    assert max(np.median(e.coherence[0, 0]) for e in pipe.estimates) > 0.8
+
+
+def test_third_party_tlog_runs_through_the_monitor_without_a_crash():
+    tlog = shared_data() / "mavlink_tlog" / "uavlogviewer_autotest_flight_logs.tlog"
+    src = TlogSource(tlog)
+    pipe = MonitorPipeline(SETTINGS, [src], keep_estimates=False)
+    summary = pipe.run()
+    counts = src.counts
+    assert summary["frames"] == sum(counts["received"].values()) > 90_000
+    assert counts["bad_crc"] + counts["bad_prefix_or_garbage"] > 0       # the awkward log has BAD_DATA
+
+
+def test_a_killed_monitor_leaves_a_readable_recording(tmp_path):
+    """SIGKILL mid-recording loses at most the last flush interval (1 s) of messages."""
+    out = tmp_path / "killed.mcap"
+    mon = subprocess.Popen([sys.executable, "-m", "livesweep", "monitor", "--mavlink", "udpin:127.0.0.1:14761",
+                            "--record", str(out), "--window", "30"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        time.sleep(2.0)
+        tx = MavlinkSender("udpout:127.0.0.1:14761")
+        items = sim_records(seed=7, duration_s=30.0)
+        t_first = items[0][0]
+        sent = 0
+        t0 = time.monotonic()
+        for item in items:                       # 4x real time for 3 s, then kill without warning
+            if (item[0] - t_first) / 4.0 > time.monotonic() - t0:
+                time.sleep(max(0.0, (item[0] - t_first) / 4.0 - (time.monotonic() - t0)))
+            tx.send_record(item[1], item[2])
+            sent += 1
+            if time.monotonic() - t0 > 3.0:
+                break
+        tx.close()
+        time.sleep(0.3)
+        mon.send_signal(signal.SIGKILL)
+        mon.wait(10)
+    finally:
+        if mon.poll() is None:
+            mon.kill()
+    s = read_summary(out)
+    assert not s.complete
+    got = sum(v for k, v in s.message_counts.items() if k.startswith("/mavlink/"))
+    rate = sent / 3.0
+    assert sent - 1.5 * rate <= got <= sent
+
+
+def test_a_quiet_second_input_falls_back_to_ordinary_responses():
+    """One axis swept, the other exactly still: the swept pair is still shown (not blanked by a
+    singular conditioning) and matches the model."""
+    from livesweep.sim.models import xv15_cruise
+
+    res = simulate(sweep_scenario("xv15-cruise", axes=("da",), repeats=1, omega_min_rad_s=1.0, omega_max_rad_s=20.0,
+                                  duration_s=40.0, amplitudes={"da": 3.0}, off_axis_rms=0.0, seed=8,
+                                  noise=False, turbulence=False))
+    recs, _ = mavlink_timeline(res)
+    from livesweep.telemetry.frames import Frame
+
+    class ListSource:
+        finished = False
+        counts = {}
+
+        def __init__(self, frames):
+            self.frames = frames
+
+        def poll(self, timeout_s=0.05, max_frames=10_000):
+            out, self.frames = self.frames[:max_frames], self.frames[max_frames:]
+            self.finished = not self.frames
+            return out
+
+        def close(self):
+            pass
+
+    frames = [Frame(f"/mavlink/{r.msgname}", r.log_time_ns, r.vehicle_time_ns, r.record) for r in recs]
+    pipe = MonitorPipeline(SETTINGS, [ListSource(frames)])
+    pipe.run()
+    last = pipe.estimates[-1]
+    assert not last.conditioned
+    w = last.omega
+    good = last.coherence[0, 0] > 0.99
+    T = xv15_cruise().frequency_response(w)[0, 0]
+    assert good.sum() > 20
+    # a single 20 s segment length on a non-stationary sweep carries windowing bias (measured 0.7 dB
+    # worst, about 2.6 random errors): a coarse bound, the point here is that the pair is not blanked
+    assert np.all(np.isfinite(last.magnitude_db[0, 0]))
+    assert np.max(np.abs(last.magnitude_db[0, 0, good] - 20 * np.log10(np.abs(T[good])))) < 1.0
