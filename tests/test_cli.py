@@ -12,18 +12,27 @@ def livesweep(*args, cwd=None):
     return subprocess.run([sys.executable, "-m", "livesweep", *args], capture_output=True, text=True, cwd=cwd, timeout=300)
 
 
-def test_demo_writes_the_cruise_sweeps_and_says_what_and_where(tmp_path):
+def test_demo_flies_the_sweeps_live_records_them_and_identifies(tmp_path):
+    import json
+
+    from rerun.chunk import RrdReader
+
     r = livesweep("demo", "--out", str(tmp_path / "demo"))
     assert r.returncode == 0, r.stderr
-    path = tmp_path / "demo" / "xv15_cruise_sweeps_da.mcap"
-    assert str(path) in r.stdout
-    s = read_summary(path)
-    for topic, n in s.message_counts.items():
-        line = next(ln for ln in r.stdout.splitlines() if ln.strip().startswith(topic + " "))
-        assert int(line.split()[1]) == n
-    assert s.message_counts["/mavlink/HIGHRES_IMU"] == pytest.approx(100 * s.duration_s, rel=0.01)
-    assert f"{s.duration_s:.1f} s of flight" in r.stdout
-    assert "da sweep 2" in r.stdout
+    log = tmp_path / "demo" / "live.mcap"
+    s = read_summary(log)
+    assert s.complete
+    recorded = int(next(ln for ln in r.stdout.splitlines() if "recorded" in ln).split()[1])
+    assert sum(s.message_counts.values()) == recorded
+    frames = int(next(ln for ln in r.stdout.splitlines() if ln.startswith("monitor:")).split()[1])
+    assert sum(v for k, v in s.message_counts.items() if k.startswith("/mavlink/")) == frames
+    assert s.message_counts["/mavlink/HIGHRES_IMU"] == pytest.approx(100 * 217, rel=0.01)   # nothing lost
+    assert "verdict: GO" in r.stdout
+    paths = {c.entity_path for c in RrdReader(tmp_path / "demo" / "live.rrd").stream().to_chunks()}
+    assert any(p.startswith("/telemetry/") for p in paths) and any(p.startswith("/spectra/") for p in paths)
+    rep = json.loads((tmp_path / "demo" / "report" / "report.json").read_text())
+    p_da = next(e for e in rep["data_quality"]["excitation"] if e["output"] == "p" and e["input"] == "da")
+    assert p_da["fraction_of_band"] == 1.0
 
 
 def test_sim_writes_a_verification_log_with_an_effect(tmp_path):
@@ -64,3 +73,26 @@ def test_unwritable_output_path_is_refused_before_any_work(tmp_path):
     assert r.returncode == 2 and "is not a directory" in r.stderr
     r = livesweep("sim")
     assert r.returncode == 2 and "--out" in r.stderr
+
+
+def test_monitor_and_replay_refuse_bad_input(tmp_path):
+    r = livesweep("monitor", "--duration", "1")
+    assert r.returncode == 2 and "--mavlink" in r.stderr
+    r = livesweep("monitor", "--mavlink", "/tmp/bin/evil.tlog", "--duration", "1")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    r = livesweep("monitor", "--mavlink", "udpin:127.0.0.1:0", "--require", "q/da", "--duration", "1")
+    assert r.returncode == 2 and "--require 'q/da'" in r.stderr
+    r = livesweep("replay", str(tmp_path / "missing.mcap"))
+    assert r.returncode == 2 and "does not exist" in r.stderr
+
+
+def test_replay_of_a_sample_log_gives_the_verdict():
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    r = livesweep("replay", str(root / "replay_logs" / "xv15_cruise_sweeps_da.mcap"), "--case",
+                  str(root / "config" / "xv15_channels.toml"), "--window", "240", "--require", "p/da")
+    assert r.returncode == 0, r.stderr
+    assert "verdict: GO" in r.stdout
+    line = next(ln for ln in r.stdout.splitlines() if ln.strip().startswith("p/da"))
+    assert int(line.split("over")[1].split("%")[0]) >= 90

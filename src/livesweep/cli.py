@@ -122,8 +122,8 @@ aircraft = "XV-15"
 condition = "cruise, 170 kn TAS (simulated)"
 
 [[identify]]
-log = "xv15_cruise_sweeps_da.mcap"
-label = "aileron sweeps x2"
+log = "live.mcap"
+label = "aileron sweeps x2, recorded live"
 
 {signals}
 [spectral]
@@ -135,10 +135,17 @@ sample_rate_hz = 50.0
 
 
 def cmd_demo(args) -> int:
-    """Simulate the XV-15 cruise aileron sweeps, write them as MCAP, and identify their frequency responses."""
-    from livesweep.sim.samples import SAMPLE_LOGS, sample_scenario
-    from livesweep.sim.scenario import simulate
-    from livesweep.telemetry.sim_telemetry import write_sim_log
+    """Fly the XV-15 cruise aileron sweeps live: simulator -> MAVLink 2 over UDP loopback -> monitor
+    (MCAP recording, Rerun, verdict) -> frequency responses from the recording."""
+    import subprocess
+    import time
+
+    from livesweep.config import load_channel_map
+    from livesweep.monitor.pipeline import MonitorPipeline, MonitorSettings
+    from livesweep.monitor.rerun_view import RerunView
+    from livesweep.sim.samples import SAMPLE_LOGS
+    from livesweep.telemetry.mavlink_in import MavlinkSource
+    from livesweep.telemetry.recorder import McapRecorder
 
     out_dir = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="livesweep-demo-"))
     if out_dir.exists() and not out_dir.is_dir():
@@ -146,21 +153,50 @@ def cmd_demo(args) -> int:
     out_dir.mkdir(parents=True, exist_ok=True)
     if not os.access(out_dir, os.W_OK):
         raise ConfigError(f"--out {str(out_dir)!r} is not writable")
+    if not (math.isfinite(args.speed) and args.speed > 0):
+        raise ConfigError(f"--speed must be > 0, got {args.speed!r}")
     name = "xv15_cruise_sweeps_da.mcap"
     print(f"livesweep {__version__} demo: {SAMPLE_LOGS[name][0]}")
-    result = simulate(sample_scenario(name))
-    path = out_dir / name
-    write_sim_log(result, path, notes="livesweep demo")
-    _print_log_summary(path)
-    print("  manoeuvres (vehicle time since boot):")
-    for s in result.segments:
-        if s.kind != "trim":
-            print(f"    {s.label:16s} {s.start_s:8.1f} .. {s.end_s:8.1f} s")
+    channels = Path(__file__).resolve().parent / "data" / "xv15_channels.toml"
+    signals, _ = load_channel_map(channels)
+    settings = MonitorSettings(signals=signals, inputs=("da",), outputs=("p", "r", "ay", "beta"), band_rad_s=(0.3, 20.0),
+                               sample_rate_hz=50.0, window_s=240.0, required_pairs=(("p", "da"),))
+    source = MavlinkSource("udpin:127.0.0.1:0")
+    port = source.local_address[1]
+    log = out_dir / "live.mcap"
+    rrd = out_dir / "live.rrd"
+    recorder = McapRecorder(log, settings=settings.to_dict(),
+                            metadata={"test_point": {"aircraft": "XV-15", "manoeuvre": "aileron sweeps x2 (simulated)",
+                                                     "source": "livesweep demo"}})
+    view = RerunView(list(settings.inputs), list(settings.outputs), recording_id="demo",
+                     save_path=None if args.view else rrd, spawn=args.view)
+    print(f"  simulator -> MAVLink 2 over udp 127.0.0.1:{port} at {args.speed:g}x real time -> monitor")
+    sim = subprocess.Popen([sys.executable, "-m", "livesweep", "sim", "--axis", "da", "--repeat", "2",
+                            "--omega-min", "0.3", "--omega-max", "20", "--duration", "100", "--amplitude", "3",
+                            "--off-axis-rms", "0.2", "--seed", "11", "--speed", str(args.speed),
+                            "--mavlink", f"udpout:127.0.0.1:{port}"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    finished = []
+
+    def stop() -> bool:
+        if sim.poll() is None:
+            return False
+        finished.append(time.monotonic())
+        return time.monotonic() - finished[0] > 1.0          # drain what is still in flight
+
+    pipe = MonitorPipeline(settings, [source], recorder=recorder, view=view, keep_estimates=False)
+    try:
+        summary = pipe.run(stop=stop)
+    finally:
+        if sim.poll() is None:
+            sim.kill()
+    if sim.returncode not in (0, None):
+        raise LivesweepError(f"the simulator failed: {sim.stderr.read().decode().strip()[-300:]}")
+    _print_monitor_summary(summary)
+    print(f"  recording: {log}" + ("" if args.view else f"\n  rerun: {rrd} (open with: rerun {rrd})"))
     print()
-    channels = (Path(__file__).resolve().parent / "data" / "xv15_channels.toml").read_text()
-    signals = channels[channels.index("[signals.da]"):channels.index("[spectral]")]
+    signals_text = channels.read_text()
     case = out_dir / "demo_case.toml"
-    case.write_text(DEMO_CASE.format(signals=signals))
+    case.write_text(DEMO_CASE.format(signals=signals_text[signals_text.index("[signals.da]"):signals_text.index("[spectral]")]))
     return cmd_identify(argparse.Namespace(case=str(case), out=str(out_dir / "report"), stage="frequency-response"))
 
 
@@ -381,8 +417,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="last stage to run (more stages come with the parametric issues)")
     i.set_defaults(func=cmd_identify)
 
-    d = sub.add_parser("demo", help="simulate the XV-15 cruise sweeps to MCAP and identify their frequency responses")
-    d.add_argument("--out", help="folder for the log (default: a new temporary folder)")
+    d = sub.add_parser("demo", help="fly simulated XV-15 sweeps live into the monitor, record them, identify frequency responses")
+    d.add_argument("--out", help="folder for the recording, the .rrd and the report (default: a new temporary folder)")
+    d.add_argument("--speed", type=_positive_float, default=20.0, help="simulator pace, x real time (default 20)")
+    d.add_argument("--view", action="store_true", help="open the Rerun viewer instead of writing live.rrd")
     d.set_defaults(func=cmd_demo)
     return p
 

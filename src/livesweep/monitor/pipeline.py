@@ -143,6 +143,8 @@ class MonitorPipeline:
         self._recent = {n: (deque(maxlen=recent), deque(maxlen=recent)) for n in settings.inputs}
         self._seen_gaps = self._seen_lost = 0
         self._last_view_t = -math.inf
+        self._t_first: float | None = None
+        self.last_status = None
 
     # -- the loop ---------------------------------------------------------------------------
     def run(self, duration_s: float | None = None, stop=None, clock=time.monotonic) -> dict:
@@ -196,6 +198,7 @@ class MonitorPipeline:
                                      ["input" if x in self.s.inputs else "output" for x in self.names])
         if self._next_tick is None:
             self._next_tick = block.t0_s + self.s.update_period_s
+            self._t_first = block.t0_s
         # feed the estimator tick by tick so estimates depend on data time only
         start = 0
         while start < n:
@@ -228,6 +231,7 @@ class MonitorPipeline:
         phase = np.rad2deg(np.unwrap(np.angle(frs.H), axis=-1))
         est = Estimate(t_s, frs.omega, frs.coherence, mag, phase, frs.conditioned, status, res.n_segments)
         self.totals.estimates += 1
+        self.last_status = status
         if self.keep_estimates:
             self.estimates.append(est)
         rows = [{"output": p.output, "input": p.input, "band": p.adequate_band_rad_s, "fraction": p.fraction}
@@ -296,12 +300,12 @@ class MonitorPipeline:
             self.publisher.close()
 
     def summary(self) -> dict:
-        last = self.estimates[-1].status if self.estimates else None
+        last = self.last_status
         lat = np.asarray(self.totals.latency_s)
         return {
             "frames": self.totals.frames, "blocks": self.totals.blocks, "estimates": self.totals.estimates,
             "wall_s": round(self.totals.wall_s, 3),
-            "data_s": None if self._next_tick is None else round(self._next_tick - self.s.update_period_s, 3),
+            "data_s": None if self._next_tick is None else round(self._next_tick - self.s.update_period_s - self._t_first, 3),
             "aligner": dict(self.aligner.counts),
             "sources": [src.counts for src in self.sources],
             "recorded": None if self.recorder is None else dict(self.recorder.message_counts),
