@@ -145,6 +145,7 @@ class MonitorPipeline:
         self._last_view_t = -math.inf
         self._t_first: float | None = None
         self.last_status = None
+        self._oldest_unlogged: float | None = None
 
     # -- the loop ---------------------------------------------------------------------------
     def run(self, duration_s: float | None = None, stop=None, clock=time.monotonic) -> dict:
@@ -166,6 +167,8 @@ class MonitorPipeline:
                         continue
                     got += len(frames)
                     t_rx = time.monotonic()
+                    if self._oldest_unlogged is None:
+                        self._oldest_unlogged = t_rx
                     if self.recorder is not None:
                         self.recorder.record(frames)
                     for f in frames:
@@ -242,7 +245,9 @@ class MonitorPipeline:
                                    rows, status.verdict, list(status.reasons))
             if status.alerts:
                 self.view.log_alerts(t_s, [(a.kind, a.message) for a in status.alerts])
-            self.totals.latency_s.append(time.monotonic() - t_rx)
+            if self._oldest_unlogged is not None:     # arrival of the oldest frame this estimate includes
+                self.totals.latency_s.append(time.monotonic() - self._oldest_unlogged)
+                self._oldest_unlogged = None
         payload = self._payload(est, rows)
         if self.publisher is not None:
             self.publisher.publish("estimate", payload)
