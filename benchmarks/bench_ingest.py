@@ -1,15 +1,15 @@
 #!/usr/bin/env python3
 """Live ingest: MAVLink 2 over UDP loopback at ~2000 messages/s for ~60 s into the full monitor.
 
-A `livesweep sim` process streams the XV-15 cruise sweeps (both axes, two sweeps each) at 6.7x real
-time (~2000 msg/s). Measured in the same run:
+A `livesweep sim` process streams the XV-15 cruise sweeps (both axes, two sweeps each) at 8x real
+time (~2000 msg/s); estimates every 0.2 s of wall time (1.6 s of flight). Measured in the same run:
 
 * baseline: a bare pymavlink receive loop (parse only) on the same stream -> CPU per message;
 * monitor: MAVLink source -> MCAP recorder -> aligner -> online estimator (5 updates/s) -> Rerun
   (.rrd, every estimate logged) -> CPU per message, CPU share, received = sent = recorded, and
   the latency from a packet's arrival to the Rerun log of the estimate that includes it.
 
-    python benchmarks/bench_ingest.py [--speed 6.7]
+    python benchmarks/bench_ingest.py [--speed 8]
 """
 
 from __future__ import annotations
@@ -73,8 +73,9 @@ def monitor(speed: float, out: Path) -> dict:
     from livesweep.telemetry.recorder import McapRecorder
 
     signals, _ = load_channel_map(ROOT / "config" / "xv15_channels.toml")
+    period = 0.2 * speed            # 5 estimates per second of wall time, every one logged to Rerun
     st = MonitorSettings(signals=signals, inputs=("da", "dr"), outputs=("p", "r", "ay", "beta"), band_rad_s=(0.5, 20.0),
-                         window_s=120.0, update_period_s=0.2, view_period_s=0.2, results_every=5)
+                         window_s=120.0, update_period_s=period, view_period_s=period, results_every=1)
     src = MavlinkSource("udpin:127.0.0.1:0")
     sim = start_sim(src.local_address[1], speed)
     rec = McapRecorder(out / "ingest.mcap", settings=st.to_dict())
@@ -93,15 +94,16 @@ def monitor(speed: float, out: Path) -> dict:
     cpu = time.process_time() - cpu0
     s = read_summary(out / "ingest.mcap")
     recorded = sum(v for k, v in s.message_counts.items() if k.startswith("/mavlink/"))
-    lat = np.asarray(pipe.totals.latency_s)
+    lat = np.asarray(pipe.totals.latency_s[1:])   # the first waits for the first full segment
     return {"received": summary["frames"], "sent": sent_count(sim), "recorded": recorded, "cpu_s": cpu,
             "wall_s": summary["wall_s"], "estimates": summary["estimates"], "lat_p50": np.percentile(lat, 50),
-            "lat_p99": np.percentile(lat, 99), "lat_max": lat.max(), "data_s": summary["data_s"]}
+            "lat_p99": np.percentile(lat, 99), "lat_max": lat.max(), "data_s": summary["data_s"],
+            "first_s": pipe.totals.latency_s[0]}
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--speed", type=float, default=6.7)
+    ap.add_argument("--speed", type=float, default=8.0, help="x real time: 8 gives about 2000 msg/s")
     args = ap.parse_args()
     b = baseline(args.speed)
     with tempfile.TemporaryDirectory() as tmp:
@@ -113,9 +115,10 @@ def main() -> None:
     print(f"monitor (record, align, estimate, rerun): received {m['received']}/{m['sent']}, recorded {m['recorded']}, "
           f"CPU {1e6 * m['cpu_s'] / max(m['received'], 1):6.1f} us/msg ({100 * m['cpu_s'] / m['wall_s']:.0f} % of a core)")
     print(f"  ratio monitor / bare parse CPU per message: {(m['cpu_s'] / m['received']) / (b['cpu_s'] / b['received']):.2f}")
-    print(f"  {m['estimates']} estimates (5/s of data, every one logged to Rerun); latency packet -> Rerun log: "
-          f"p50 {1e3 * m['lat_p50']:.0f} ms, p99 {1e3 * m['lat_p99']:.0f} ms, max {1e3 * m['lat_max']:.0f} ms "
-          f"(target p99 <= update period 200 ms / speed + 50 ms = {200 / args.speed + 50:.0f} ms of wall time)")
+    print(f"  {m['estimates']} estimates (5 per wall second, every one logged to Rerun); latency packet -> Rerun log "
+          f"of the estimate that includes it: p50 {1e3 * m['lat_p50']:.0f} ms, p99 {1e3 * m['lat_p99']:.0f} ms, "
+          f"max {1e3 * m['lat_max']:.0f} ms (target p99 <= 200 ms update period + 50 ms); the first estimate waits "
+          f"{m['first_s']:.1f} s for the first full segment")
 
 
 if __name__ == "__main__":

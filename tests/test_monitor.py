@@ -276,3 +276,81 @@ def test_a_quiet_second_input_falls_back_to_ordinary_responses():
     # worst, about 2.6 random errors): a coarse bound, the point here is that the pair is not blanked
     assert np.all(np.isfinite(last.magnitude_db[0, 0]))
     assert np.max(np.abs(last.magnitude_db[0, 0, good] - 20 * np.log10(np.abs(T[good])))) < 1.0
+
+
+def test_monitor_publishes_results_on_zenoh(tmp_path):
+    import socket
+
+    import zenoh
+
+    from livesweep.telemetry.zenoh_io import ZenohPublisher, zenoh_config
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    got = []
+    ground = zenoh.open(zenoh_config(listen=[f"tcp/127.0.0.1:{port}"]))     # a second ground station
+    sub = ground.declare_subscriber("livesweep/**", lambda smp: got.append(json.loads(smp.payload.to_bytes())))
+    try:
+        pub = ZenohPublisher(connect_port=port)
+        time.sleep(0.5)
+        res = simulate(sweep_scenario("xv15-cruise", axes=("da",), repeats=1, omega_min_rad_s=1.0, omega_max_rad_s=20.0,
+                                      duration_s=30.0, amplitudes={"da": 3.0}, seed=9))
+        recs, _ = mavlink_timeline(res)
+        from livesweep.telemetry.frames import Frame
+
+        frames = [Frame(f"/mavlink/{r.msgname}", r.log_time_ns, r.vehicle_time_ns, r.record) for r in recs]
+
+        class Once:
+            counts, finished = {}, False
+
+            def poll(self, timeout_s=0.05, max_frames=10_000):
+                self.finished = True
+                return frames
+
+            def close(self):
+                pass
+
+        st = MonitorSettings(signals=SIGNALS, inputs=("da",), outputs=("p",), band_rad_s=(1.0, 20.0), window_s=30.0,
+                             segment_s=10.0, update_period_s=1.0)
+        pipe = MonitorPipeline(st, [Once()], publisher=pub)
+        pipe.run()
+        deadline = time.monotonic() + 5
+        while len(got) < pipe.totals.estimates and time.monotonic() < deadline:
+            time.sleep(0.05)
+    finally:
+        sub.undeclare()
+        ground.close()
+    assert pipe.totals.estimates > 10 and len(got) == pipe.totals.estimates
+    last = got[-1]
+    assert last["t_s"] == pytest.approx(pipe.estimates[-1].t_s)
+    np.testing.assert_array_equal(last["coherence"]["p/da"], pipe.estimates[-1].coherence[0, 0])
+
+
+@pytest.mark.parametrize("how", ["duration", "sigint"])
+def test_monitor_finishes_the_recording_on_duration_or_ctrl_c(tmp_path, how):
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    out = tmp_path / "run.mcap"
+    args = [sys.executable, "-m", "livesweep", "monitor", "--mavlink", f"udpin:127.0.0.1:{port}", "--record", str(out)]
+    if how == "duration":
+        args += ["--duration", "3"]
+    mon = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    time.sleep(1.5)
+    tx = MavlinkSender(f"udpout:127.0.0.1:{port}")
+    items = sim_records(seed=5, duration_s=30.0)[:300]
+    for t, m, r in items:
+        tx.send_record(m, r)
+    tx.close()
+    if how == "sigint":
+        time.sleep(0.5)
+        mon.send_signal(signal.SIGINT)
+    stdout, stderr = mon.communicate(timeout=30)
+    assert mon.returncode == 0, stderr
+    s = read_summary(out)
+    assert s.complete                                    # finished: summary and index written
+    assert sum(v for k, v in s.message_counts.items() if k.startswith("/mavlink/")) == len(items)
+    assert f"wrote {out}" in stdout.decode()

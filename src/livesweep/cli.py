@@ -252,7 +252,26 @@ def _monitor_settings(args):
         band_rad_s=tuple(spectral.band_rad_s), sample_rate_hz=spectral.sample_rate_hz,
         window_s=args.window or 120.0, update_period_s=args.update_period or 0.2,
         required_pairs=_required_pairs(args.require, spectral),
+        saturation_limits=_saturation_limits(args.saturation, spectral),
     )
+
+
+def _saturation_limits(items, spectral):
+    if not items:
+        return None
+    limits = {}
+    for item in items:
+        name, sep, rng = item.partition("=")
+        lo, sep2, hi = rng.partition(":")
+        try:
+            lo_f, hi_f = float(lo), float(hi)
+        except ValueError:
+            lo_f = hi_f = math.nan
+        if not sep or not sep2 or name not in spectral.inputs or not (lo_f < hi_f):
+            raise ConfigError(f"--saturation {item!r}: give INPUT=LOW:HIGH in input units with an input of "
+                              f"{list(spectral.inputs)}, e.g. da=-20:20")
+        limits[name] = (lo_f, hi_f)
+    return limits
 
 
 def _required_pairs(items, spectral):
@@ -362,6 +381,8 @@ def _add_monitor_options(m) -> None:
     m.add_argument("--rerun-spawn", action="store_true", help="open the Rerun desktop viewer")
     m.add_argument("--rerun-serve", action="store_true", help="serve the Rerun web viewer")
     m.add_argument("--rerun-bind", default="127.0.0.1", help="address the Rerun web viewer binds (default 127.0.0.1)")
+    m.add_argument("--saturation", action="append", metavar="IN=LO:HI",
+                   help="actuator limits for the saturation alert, e.g. da=-20:20 (repeatable)")
     m.add_argument("--require", action="append", metavar="OUT/IN",
                    help="pair this test point must excite for a GO, e.g. p/da (repeatable; default: on-axis pairs)")
 

@@ -26,6 +26,9 @@ from livesweep.telemetry.align import GridAligner
 
 __all__ = ["MonitorSettings", "Estimate", "MonitorPipeline"]
 
+PROCESS_EVERY_S = 0.02        # align and estimate at most this often [s of wall time] ...
+PROCESS_EVERY_FRAMES = 500    # ... unless this many frames are waiting
+
 
 @dataclass(frozen=True)
 class MonitorSettings:
@@ -158,6 +161,8 @@ class MonitorPipeline:
         """
         t_start = clock()
         timeout = 0.02 if len(self.sources) > 1 else 0.05
+        pending = 0
+        last_process = time.monotonic()
         try:
             while True:
                 got = 0
@@ -166,23 +171,32 @@ class MonitorPipeline:
                     if not frames:
                         continue
                     got += len(frames)
-                    t_rx = time.monotonic()
                     if self._oldest_unlogged is None:
-                        self._oldest_unlogged = t_rx
+                        self._oldest_unlogged = time.monotonic()
                     if self.recorder is not None:
                         self.recorder.record(frames)
                     for f in frames:
                         self.aligner.push(f)
-                    self._process(t_rx)
                 self.totals.frames += got
+                pending += got
+                # align and estimate in batches: per-call costs (array conversions, Rerun calls) would
+                # otherwise be paid for every few frames a live socket delivers
+                now = time.monotonic()
+                finished = all(s.finished for s in self.sources)
+                if pending and (pending >= PROCESS_EVERY_FRAMES or now - last_process >= PROCESS_EVERY_S or finished):
+                    self._process(now)
+                    pending = 0
+                    last_process = now
                 if self.recorder is not None:
                     self.recorder.maybe_flush()
-                if all(s.finished for s in self.sources):
+                if finished:
                     break
                 if duration_s is not None and clock() - t_start >= duration_s:
                     break
                 if stop is not None and stop():
                     break
+            if pending:
+                self._process(time.monotonic())
         finally:
             self.totals.wall_s = clock() - t_start
             self.close()
