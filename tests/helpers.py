@@ -43,3 +43,36 @@ def db(x):
 def deg_wrap(x):
     """Angle in degrees wrapped to (-180, 180]."""
     return np.angle(np.exp(1j * np.deg2rad(x)), deg=True)
+
+
+def collect_frames(src, n: int, timeout: float = 5.0, settle: float = 0.2) -> list:
+    """Poll a frame source until ``n`` frames arrived (or ``timeout`` s), then ``settle`` s more for extras."""
+    import time
+
+    out: list = []
+    deadline = time.monotonic() + timeout
+    while len(out) < n and time.monotonic() < deadline:
+        out += src.poll(0.05)
+    end = time.monotonic() + settle
+    while time.monotonic() < end:
+        out += src.poll(0.02)
+    return out
+
+
+def tcp_listeners(port: int) -> list[str] | None:
+    """Local addresses listening on TCP ``port`` per ``ss -ltn``; None when ``ss`` is not installed."""
+    import shutil
+    import subprocess
+
+    ss = shutil.which("ss")
+    if ss is None:
+        return None
+    out = subprocess.run([ss, "-ltnH"], capture_output=True, text=True, timeout=10).stdout
+    found = []
+    for line in out.splitlines():
+        cols = line.split()
+        if len(cols) >= 4:
+            host, _, p = cols[3].rpartition(":")
+            if p == str(port):
+                found.append(host)
+    return found

@@ -24,6 +24,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers import collect_frames
+
 from livesweep.errors import ConfigError, LogFormatError
 from livesweep.telemetry import mavlink_codec as codec
 from livesweep.telemetry.frames import Frame
@@ -50,15 +52,7 @@ OTHER_KEY = hashlib.sha256(b"not the key").digest()
 
 
 def collect(src, n: int, timeout: float = 3.0, settle: float = 0.15) -> list[Frame]:
-    """Poll until ``n`` frames arrived (or timeout), then a little longer to catch extras."""
-    out: list[Frame] = []
-    deadline = time.monotonic() + timeout
-    while len(out) < n and time.monotonic() < deadline:
-        out += src.poll(0.05)
-    end = time.monotonic() + settle
-    while time.monotonic() < end:
-        out += src.poll(0.02)
-    return out
+    return collect_frames(src, n, timeout, settle)
 
 
 def wait_counts(src, pred, timeout: float = 3.0) -> dict:

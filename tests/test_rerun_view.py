@@ -13,6 +13,8 @@ import time
 import numpy as np
 import pyarrow as pa
 import pytest
+
+from helpers import tcp_listeners
 import rerun as rr
 import rerun.blueprint as rrb
 from rerun.chunk import RrdReader
@@ -385,16 +387,7 @@ def _free_port():
 
 def _listening(port):
     """Local addresses listening on TCP ``port`` according to ``ss -ltn``."""
-    out = subprocess.run(["ss", "-ltnH"], capture_output=True, text=True, check=True).stdout
-    found = []
-    for line in out.splitlines():
-        fields = line.split()
-        if len(fields) >= 4:
-            local = fields[3]
-            addr, _, p = local.rpartition(":")
-            if p == str(port):
-                found.append(addr)
-    return found
+    return tcp_listeners(port) or []
 
 
 @pytest.mark.skipif(shutil.which("ss") is None, reason="ss (iproute2) not installed")

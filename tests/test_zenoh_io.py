@@ -8,17 +8,16 @@ from __future__ import annotations
 
 import json
 import math
-import shutil
 import socket
-import subprocess
 import threading
 import time
 
 import pytest
+
+from helpers import collect_frames as collect, tcp_listeners
 import zenoh
 
 from livesweep.errors import ConfigError, LivesweepError
-from livesweep.telemetry.frames import Frame
 from livesweep.telemetry.zenoh_io import ZenohPublisher, ZenohSource, zenoh_config
 
 
@@ -61,35 +60,8 @@ def wait_peer(session: zenoh.Session, timeout: float = 5.0) -> None:
         time.sleep(0.01)
 
 
-def collect(src: ZenohSource, n: int, timeout: float = 5.0, settle: float = 0.2) -> list[Frame]:
-    out: list[Frame] = []
-    deadline = time.monotonic() + timeout
-    while len(out) < n and time.monotonic() < deadline:
-        out += src.poll(0.05)
-    end = time.monotonic() + settle
-    while time.monotonic() < end:
-        out += src.poll(0.02)
-    return out
-
-
 def listeners_on(port: int) -> list[str] | None:
-    """Local addresses of TCP listening sockets on ``port`` per ``ss -ltn`` (None: no ss)."""
-    ss = shutil.which("ss")
-    if ss is None:
-        return None
-    out = subprocess.run([ss, "-ltnH"], capture_output=True, text=True, timeout=10).stdout
-    addrs = []
-    for line in out.splitlines():
-        cols = line.split()
-        if len(cols) >= 4:
-            local = cols[3]
-            host, _, p = local.rpartition(":")
-            if p == str(port):
-                addrs.append(host)
-    return addrs
-
-
-# ----------------------------------------------------------------------------- ZenohSource
+    return tcp_listeners(port)
 
 
 def test_source_receives_objects_blocks_and_counts_malformed():
