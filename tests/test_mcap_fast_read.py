@@ -1,8 +1,6 @@
 """The fast chunk walk behind read_fields/read_topics_fields equals mcap's own reader."""
 
 import json
-import os
-import signal
 import subprocess
 import sys
 

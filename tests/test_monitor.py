@@ -2,7 +2,6 @@
 replay of its own recording, Zenoh into the monitor, a third-party tlog, a killed recorder."""
 
 import json
-import os
 import signal
 import subprocess
 import sys
