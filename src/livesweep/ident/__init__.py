@@ -1,1 +1,1 @@
-"""livesweep.ident"""
+"""Parametric identification: cost, transfer functions, state space, accuracy, verification (pure)."""
