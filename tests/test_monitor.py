@@ -175,7 +175,7 @@ def test_zenoh_json_samples_feed_the_monitor(tmp_path):
             block = blocks.setdefault(m, [])
             block.append(r)
             if len(block) == 20:
-                pub.put(f"vehicle/{m.lower()}", json.dumps(block))
+                pub.put(f"vehicle/{m.lower()}", json.dumps(block), congestion_control=zenoh.CongestionControl.BLOCK)
                 n += len(block)
                 block.clear()
         sigs = {k: SignalSpec(name=k, topic=f"/zenoh/vehicle/{SIGNALS[k].topic.split('/')[-1].lower()}",
@@ -209,7 +209,7 @@ def test_a_killed_monitor_leaves_a_readable_recording(tmp_path):
     mon = subprocess.Popen([sys.executable, "-m", "livesweep", "monitor", "--mavlink", "udpin:127.0.0.1:14761",
                             "--record", str(out), "--window", "30"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
-        time.sleep(2.0)
+        assert mon.stdout.readline().startswith(b"monitor: listening")  # the socket is bound
         tx = MavlinkSender("udpout:127.0.0.1:14761")
         items = sim_records(seed=7, duration_s=30.0)
         t_first = items[0][0]
@@ -338,7 +338,7 @@ def test_monitor_finishes_the_recording_on_duration_or_ctrl_c(tmp_path, how):
     if how == "duration":
         args += ["--duration", "3"]
     mon = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    time.sleep(1.5)
+    assert mon.stdout.readline().startswith(b"monitor: listening")      # the socket is bound
     tx = MavlinkSender(f"udpout:127.0.0.1:{port}")
     items = sim_records(seed=5, duration_s=30.0)[:300]
     for t, m, r in items:
@@ -347,7 +347,8 @@ def test_monitor_finishes_the_recording_on_duration_or_ctrl_c(tmp_path, how):
     if how == "sigint":
         time.sleep(0.5)
         mon.send_signal(signal.SIGINT)
-    stdout, stderr = mon.communicate(timeout=30)
+    rest, stderr = mon.communicate(timeout=30)
+    stdout = rest
     assert mon.returncode == 0, stderr
     s = read_summary(out)
     assert s.complete                                    # finished: summary and index written

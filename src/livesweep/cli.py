@@ -349,6 +349,8 @@ def cmd_monitor(args) -> int:
             src.close()
         raise
     pipe = MonitorPipeline(settings, sources, recorder=recorder, view=view, publisher=publisher)
+    where = [f"mavlink {u}" for u in args.mavlink or []] + ([f"zenoh {args.zenoh}"] if args.zenoh else [])
+    print(f"monitor: listening on {', '.join(where)}; Ctrl-C to stop", flush=True)
     try:
         summary = pipe.run(duration_s=args.duration)
     except KeyboardInterrupt:

@@ -1,0 +1,141 @@
+"""Accuracy of identified parameters from the residual Jacobian (method.md §8.4).
+
+With ``r(theta)`` the stacked weighted residuals of :func:`livesweep.ident.cost.residuals` (so the
+total cost is ``J = sum(r^2)``, dimensionless) and ``D = dr/dtheta`` at the solution::
+
+    H      = 2 D^T D                               Gauss-Newton Hessian of J
+    CR_i   = sqrt((H^-1)_ii)                       Cramer-Rao bound (1 sigma), parameter units
+    I_i    = 1 / sqrt(H_ii)                        insensitivity (others held fixed), parameter units
+    rho_ij = (H^-1)_ij / sqrt((H^-1)_ii (H^-1)_jj) correlation
+    CR_i%  = 100 CR_i / |theta_i|,   I_i% = 100 I_i / |theta_i|
+
+Normalisation
+-------------
+This is the *raw* normalisation of method.md §8.4: no residual-variance factor, no ``dec_span``
+factor. It treats the weighted residuals as if each had variance 1/2. CIFER's absolute scaling is
+not public, so the bounds are calibrated against Monte-Carlo scatter instead
+(``tests/test_state_space.py::test_cramer_rao_monte_carlo``). The factor measured there is
+:data:`MONTE_CARLO_SCATTER_OVER_CR` (observed standard deviation of the estimates divided by the
+mean raw CR bound, median over parameters): the raw bounds are optimistic by about that factor for
+livesweep's composite, coherence-weighted frequency-response data. The guidelines (CR% <= 20,
+I% <= 10) are applied to the raw values, as CIFER users apply them to CIFER's.
+
+Always ``CR_i >= I_i``; a large ratio flags a parameter that is sensitive but correlated with
+others. Parameters with no effect on the cost get infinite bounds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Accuracy", "accuracy_from_jacobian", "MONTE_CARLO_SCATTER_OVER_CR", "MAX_CRAMER_RAO_PCT",
+           "MAX_INSENSITIVITY_PCT", "MAX_CORRELATION"]
+
+#: Observed scatter of Monte-Carlo estimates divided by the mean raw Cramer-Rao bound (see the
+#: module docstring; measured by tests/test_state_space.py on the XV-15 cruise simulator).
+MONTE_CARLO_SCATTER_OVER_CR = 2.0
+
+#: Guidelines (method.md §8.4, M): CR% <= 20, I% <= 10, |rho| above 0.9 flags a trade-off.
+MAX_CRAMER_RAO_PCT = 20.0
+MAX_INSENSITIVITY_PCT = 10.0
+MAX_CORRELATION = 0.9
+
+
+def _frozen(a):
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class Accuracy:
+    """Accuracy metrics of a set of (free) parameters.
+
+    Attributes
+    ----------
+    values : ndarray
+        Parameter values at the solution (parameter units).
+    hessian : ndarray, shape (n, n)
+        ``2 D^T D`` [cost units / parameter units^2].
+    cramer_rao : ndarray
+        CR bounds (parameter units, 1 sigma; inf when not identifiable).
+    insensitivity : ndarray
+        Insensitivities (parameter units; inf when the cost does not depend on the parameter).
+    cramer_rao_pct, insensitivity_pct : ndarray
+        Relative to ``|value|`` [%] (inf for a zero value).
+    correlation : ndarray, shape (n, n)
+        Parameter correlation (NaN rows for non-identifiable parameters).
+    """
+
+    values: np.ndarray
+    hessian: np.ndarray
+    cramer_rao: np.ndarray
+    insensitivity: np.ndarray
+    cramer_rao_pct: np.ndarray
+    insensitivity_pct: np.ndarray
+    correlation: np.ndarray
+
+
+def _pct(bound, value):
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(np.abs(value) > 0, 100.0 * bound / np.abs(value), np.inf)
+
+
+def accuracy_from_jacobian(D, theta) -> Accuracy:
+    """CR bounds, insensitivities and correlations from the residual Jacobian.
+
+    Parameters
+    ----------
+    D : ndarray, shape (n_residuals, n_parameters)
+        ``dr/dtheta`` at the solution (residual units per parameter unit).
+    theta : ndarray, shape (n_parameters,)
+        Parameter values at the solution.
+
+    Returns
+    -------
+    Accuracy
+
+    Notes
+    -----
+    ``H`` is inverted after scaling to unit diagonal (``S H S``, ``S = diag(H_ii^-1/2)``), which
+    makes the inverse insensitive to the parameters' units. A (numerically) singular scaled
+    Hessian gives infinite CR bounds for the parameters in its null space.
+    """
+    D = np.asarray(D, float)
+    theta = np.asarray(theta, float)
+    n = theta.size
+    H = 2.0 * D.T @ D
+    diag = np.diag(H).copy()
+    active = diag > 0
+    with np.errstate(divide="ignore"):
+        ins = np.where(active, 1.0 / np.sqrt(np.where(active, diag, 1.0)), np.inf)
+    cr = np.full(n, np.inf)
+    corr = np.full((n, n), np.nan)
+    idx = np.flatnonzero(active)
+    if idx.size:
+        s = 1.0 / np.sqrt(diag[idx])
+        Hs = H[np.ix_(idx, idx)] * s[:, None] * s[None, :]
+        w, V = np.linalg.eigh(Hs)
+        tol = max(w.max(), 0.0) * 1e-12 * idx.size
+        good = w > tol
+        if np.all(good):
+            Cs = (V / w) @ V.T
+            cr[idx] = np.sqrt(np.diag(Cs)) * s
+            d = np.sqrt(np.diag(Cs))
+            corr[np.ix_(idx, idx)] = Cs / d[:, None] / d[None, :]
+        else:
+            # parameters touching the null space are not identifiable: infinite bounds
+            null = np.any(np.abs(V[:, ~good]) > 1e-6, axis=1)
+            Cs = (V[:, good] / w[good]) @ V[:, good].T
+            d = np.sqrt(np.maximum(np.diag(Cs), 0.0))
+            cr[idx] = np.where(null, np.inf, d * s)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                c = Cs / d[:, None] / d[None, :]
+            c[null, :] = np.nan
+            c[:, null] = np.nan
+            corr[np.ix_(idx, idx)] = c
+    corr = np.clip(corr, -1.0, 1.0)
+    return Accuracy(_frozen(theta), _frozen(H), _frozen(cr), _frozen(ins), _frozen(_pct(cr, theta)),
+                    _frozen(_pct(ins, theta)), _frozen(corr))
