@@ -12,13 +12,14 @@ import numpy as np  # noqa: E402
 
 from livesweep.spectral.response import FrequencyResponse  # noqa: E402
 
-__all__ = ["bode_plot"]
+__all__ = ["bode_plot", "time_history_plot"]
 
 ADEQUATE_COHERENCE = 0.6
 
 
 def bode_plot(response: FrequencyResponse, path, *, title: str = "", units: tuple[str, str] = ("", ""),
-              ordinary: FrequencyResponse | None = None) -> Path:
+              ordinary: FrequencyResponse | None = None, models: list | None = None,
+              fit_band_rad_s: tuple | None = None) -> Path:
     """Write a PNG with magnitude [dB], phase [deg] and coherence against frequency [rad/s].
 
     Parameters
@@ -32,6 +33,10 @@ def bode_plot(response: FrequencyResponse, path, *, title: str = "", units: tupl
         Output and input units, for the magnitude label.
     ordinary : FrequencyResponse, optional
         The unconditioned estimate of the same pair, drawn thin for comparison.
+    models : list of (label, omega, H), optional
+        Identified model responses to overlay (dashed).
+    fit_band_rad_s : (float, float), optional
+        The band the models were fitted over (shaded).
 
     Returns
     -------
@@ -51,6 +56,15 @@ def bode_plot(response: FrequencyResponse, path, *, title: str = "", units: tupl
     if ordinary is not None:
         a1.semilogx(w, ordinary.magnitude_db, "C1", lw=0.8, label="ordinary (SISO)")
         a2.semilogx(w, ordinary.phase_deg, "C1", lw=0.8)
+    for k, (label, wm, Hm) in enumerate(models or []):
+        a1.semilogx(wm, 20 * np.log10(np.abs(Hm)), ls="--", color=f"C{3 + k}", lw=1.4, label=label)
+        ph_m = np.rad2deg(np.unwrap(np.angle(Hm)))
+        ref = np.interp(wm[0], w, ph) if np.isfinite(ph).any() else 0.0
+        ph_m += 360.0 * np.round((ref - ph_m[0]) / 360.0)      # same branch as the data
+        a2.semilogx(wm, ph_m, ls="--", color=f"C{3 + k}", lw=1.4)
+    if fit_band_rad_s is not None:
+        for a in (a1, a2, a3):
+            a.axvspan(*fit_band_rad_s, color="0.85", alpha=0.4, lw=0)
     a3.semilogx(w, response.coherence, "C2", lw=1.4, label="partial coherence" if response.conditioned else "coherence")
     a3.axhline(ADEQUATE_COHERENCE, color="k", lw=0.7, ls="--")
     a3.set_ylim(0, 1.05)
@@ -64,6 +78,34 @@ def bode_plot(response: FrequencyResponse, path, *, title: str = "", units: tupl
     a1.legend(fontsize=8, loc="best")
     a3.legend(fontsize=8, loc="lower left")
     fig.suptitle(title or f"{response.output} / {response.input}")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def time_history_plot(t_s, measured, predicted, inputs, names, units, input_names, path, *, title: str = "",
+                      tic=None) -> Path:
+    """Verification plot: measured (solid) and model (dashed) outputs, and the inputs, against time [s]."""
+    path = Path(path)
+    n = len(names)
+    fig, axes = plt.subplots(n + 1, 1, figsize=(8.0, 1.7 * (n + 1) + 0.6), sharex=True)
+    for k, ax in enumerate(axes[:-1]):
+        ax.plot(t_s, measured[k], "k", lw=1.0, label="flight")
+        ax.plot(t_s, predicted[k], "C3--", lw=1.2, label="model")
+        lab = f"{names[k]} [{units[k]}]" if units and units[k] else names[k]
+        ax.set_ylabel(lab)
+        if tic is not None:
+            ax.text(0.99, 0.85, f"TIC {tic[k]:.3f}", transform=ax.transAxes, ha="right", fontsize=8)
+        ax.grid(True, lw=0.3)
+    axes[0].legend(fontsize=8, loc="upper left")
+    for j, u in enumerate(inputs):
+        axes[-1].plot(t_s, u, lw=1.0, label=input_names[j])
+    axes[-1].set_ylabel("inputs")
+    axes[-1].legend(fontsize=8, loc="upper left")
+    axes[-1].set_xlabel("time [s]")
+    axes[-1].grid(True, lw=0.3)
+    fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
