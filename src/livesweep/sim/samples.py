@@ -24,10 +24,12 @@ SAMPLE_LOGS = {
                                duration_s=100.0, amplitudes={"dr": 5.0}, off_axis_rms=0.2, seed=12),
     ),
     "xv15_cruise_verify.mcap": (
-        "XV-15 cruise 170 kn: aileron doublet, rudder doublet, aileron 3-2-1-1 (verification)",
+        "XV-15 cruise 170 kn, calm air (30 % of the sweeps' turbulence): aileron doublet, rudder doublet, "
+        "aileron 3-2-1-1 (verification)",
         lambda: verification_scenario("xv15-cruise", manoeuvres=(("da", "doublet", 2.0, 1.0),
                                                                  ("dr", "doublet", 3.0, 1.5),
-                                                                 ("da", "3211", 1.5, 0.7)), seed=13),
+                                                                 ("da", "3211", 1.5, 0.7)), seed=13,
+                                      turbulence_scale=0.3),
     ),
     "xv15_hover_sweeps_da.mcap": (
         "XV-15 hover, SCAS off, pilot stabilising: two aileron sweeps 0.2-12 rad/s, 100 s each, +/-1.5 deg",

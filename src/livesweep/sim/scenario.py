@@ -337,14 +337,18 @@ def default_pilot(model: LinearVehicleModel) -> PilotLoop | None:
     return PilotLoop(gains=(("da", "phi", 0.5), ("da", "p", 0.2), ("dr", "r", -1.0)), delay_s=0.2)
 
 
-def _standard_scenario(m, segments, effects, noise, turbulence, seed) -> Scenario:
-    """A test point with the model's default sensors, turbulence and (if unstable) pilot."""
+def _standard_scenario(m, segments, effects, noise, turbulence, seed, turbulence_scale: float = 1.0) -> Scenario:
+    """A test point with the model's default sensors, turbulence (scaled) and (if unstable) pilot."""
+    turb = None
+    if turbulence:
+        d = default_turbulence(m)
+        turb = Turbulence(sigmas=tuple(turbulence_scale * s for s in d.sigmas), correlation_time_s=d.correlation_time_s)
     return Scenario(
         model=m,
         segments=tuple(segments),
         effects=tuple(effects),
         sensors=default_sensors(m, noise),
-        turbulence=default_turbulence(m) if turbulence else None,
+        turbulence=turb,
         pilot=default_pilot(m),
         seed=seed,
         condition=m.description,
@@ -417,11 +421,14 @@ def verification_scenario(
     noise: bool = True,
     turbulence: bool = True,
     seed: int = 0,
+    turbulence_scale: float = 1.0,
 ) -> Scenario:
     """Dissimilar manoeuvres for time-domain verification.
 
     Parameters
     ----------
+    turbulence_scale : float
+        Multiplies the default turbulence (verification is flown in calm air: 0.3).
     manoeuvres : tuple of (axis, kind, amplitude, unit_s)
         ``kind`` is ``doublet``, ``3211`` or ``step``; ``unit_s`` is the pulse (or hold) length [s].
     """
@@ -438,4 +445,4 @@ def verification_scenario(
         else:
             raise ConfigError(f"unknown verification manoeuvre {kind!r}; use doublet, 3211 or step")
         segments.append(Segment(f"{axis} {kind}", kind, axis, sig))
-    return _standard_scenario(m, segments, effects, noise, turbulence, seed)
+    return _standard_scenario(m, segments, effects, noise, turbulence, seed, turbulence_scale)
