@@ -442,7 +442,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     d = sub.add_parser("demo", help="fly simulated XV-15 sweeps live into the monitor, record them, identify frequency responses")
     d.add_argument("--out", help="folder for the recording, the .rrd and the report (default: a new temporary folder)")
-    d.add_argument("--speed", type=_positive_float, default=20.0, help="simulator pace, x real time (default 20)")
+    d.add_argument("--speed", type=_positive_float, default=10.0, help="simulator pace, x real time (default 10)")
     d.add_argument("--view", action="store_true", help="open the Rerun viewer instead of writing live.rrd")
     d.set_defaults(func=cmd_demo)
     return p

@@ -125,8 +125,17 @@ def analyze(values: np.ndarray, names, sample_rate_hz: float, inputs, outputs, b
     used = [n for n in names if n in inputs or n in outputs]
     rows = [names.index(n) for n in used]
     x = values[rows]
-    windows = tuple(window_spectra(x, used, sample_rate_hz, w, band_rad_s, valid=valid, overlap=overlap)
-                    for w in windows_s)
+    windows, skipped = [], []
+    for w in windows_s:
+        try:
+            windows.append(window_spectra(x, used, sample_rate_hz, w, band_rad_s, valid=valid, overlap=overlap))
+        except ConfigError:
+            if valid is None or np.all(valid):
+                raise
+            skipped.append(w)             # no window of this length fits between the data gaps
+    if not windows:
+        raise ConfigError(f"no window of {list(windows_s)} s fits between the data gaps of the record")
+    windows = tuple(windows)
     omega = np.geomspace(band_rad_s[0], band_rad_s[1], n_freq)
     idx_in = [used.index(n) for n in inputs]
     idx_out = [used.index(n) for n in outputs]
@@ -142,6 +151,7 @@ def analyze(values: np.ndarray, names, sample_rate_hz: float, inputs, outputs, b
         "composite": "inverse-variance weighted spectra (livesweep.spectral.composite)",
         "averages": [{"window_s": w.window_s, "segments": w.n_segments, "n_eff": round(w.n_eff, 2),
                       "excluded_for_gaps": w.n_excluded} for w in windows],
+        "windows_skipped_for_gaps_s": skipped,
     }
     ill_in = _input_coherence_composite(windows, omega, idx_in) > max_input_coherence if len(idx_in) > 1 else None
     siso = FrequencyResponseSet(tuple(outputs), tuple(inputs), omega, H, coh, eps, False, None, ill_in, settings)
