@@ -197,20 +197,45 @@ def cmd_demo(args) -> int:
     signals_text = channels.read_text()
     case = out_dir / "demo_case.toml"
     case.write_text(DEMO_CASE.format(signals=signals_text[signals_text.index("[signals.da]"):signals_text.index("[spectral]")]))
-    return cmd_identify(argparse.Namespace(case=str(case), out=str(out_dir / "report"), stage="frequency-response"))
+    return cmd_identify(argparse.Namespace(case=str(case), out=str(out_dir / "report"), stage="verification"))
+
+
+STAGES = ("frequency-response", "transfer-functions", "state-space", "verification")
 
 
 def cmd_identify(args) -> int:
-    """Identify from a case file: for now the frequency-response stage."""
+    """Identify from a case file: frequency responses, then (as the case defines them) transfer
+    functions, state-space derivatives and time-domain verification."""
+    import time
+
     from livesweep.config import load_case
     from livesweep.pipeline.frequency_response import run_frequency_response_stage
+    from livesweep.pipeline.parametric import (run_state_space_stage, run_transfer_function_stage,
+                                               run_verification_stage)
     from livesweep.report.writer import prepare_out_dir, write_frequency_report
 
     prepare_out_dir(args.out)
     case = load_case(args.case)
+    last = STAGES.index(args.stage)
+    t0 = time.monotonic()
+
+    def progress(msg):
+        print(f"[{time.monotonic() - t0:6.1f} s] {msg}", flush=True)
+
+    progress(f"{case.name}: frequency responses from {len(case.identify)} record(s)")
     stage = run_frequency_response_stage(case)
-    path = write_frequency_report(stage, args.out)
     best = stage.analysis.best
+    tf = ss = ver = None
+    if last >= 1 and case.tables.get("transfer_functions"):
+        progress(f"transfer functions: {', '.join(case.tables['transfer_functions'])}")
+        tf = run_transfer_function_stage(case, best)
+    if last >= 2 and case.tables.get("state_space"):
+        ss = run_state_space_stage(case, best, progress=progress)
+    if last >= 3 and ss is not None and case.verify:
+        progress(f"verification on {len(case.verify)} record(s)")
+        ver = run_verification_stage(case, ss, case.spectral.sample_rate_hz)
+    progress("writing the report")
+    path = write_frequency_report(stage, args.out, transfer_functions=tf, state_space=ss, verification=ver)
     dq = stage.data_quality
     print(f"{case.name}: {len(best.outputs)} outputs x {len(best.inputs)} inputs, "
           f"{'MISO-conditioned' if best.conditioned else 'SISO'} composite of windows {best.settings['windows_s']} s "
@@ -229,6 +254,19 @@ def cmd_identify(args) -> int:
     wild = {n: w["replaced"] for n, w in dq["wild_points"].items() if w["replaced"]}
     if repaired or wild:
         print(f"  repairs: {repaired or 'none'}; wild points replaced: {wild or 'none'}")
+    for f in (tf.fits if tf else ()):
+        print(f"  transfer function {f.name}: gain {f.gain:.4g}, delay {1000 * f.delay_s:.1f} ms, J {f.cost:.1f}"
+              + ("" if f.converged else " (NOT CONVERGED)"))
+    if ss is not None:
+        fit = ss.fit
+        worst = max((p.cramer_rao_pct for p in fit.parameters if not p.fixed and p.cramer_rao_pct is not None),
+                    default=float("nan"))
+        print(f"  state space: J_ave {fit.cost_average:.1f}, {sum(not p.fixed for p in fit.parameters)} free parameters "
+              f"(worst CR {worst:.0f}%), removed {', '.join(fit.removed_parameters) or 'none'}"
+              + ("" if fit.converged else " (NOT CONVERGED)"))
+    for label, v in (ver.results if ver else ()):
+        print(f"  verification {label}: J_rms {v.j_rms:.3f}, TIC "
+              + ", ".join(f"{o.name} {o.tic:.3f}" for o in v.outputs) + (": pass" if v.passed else ": FAIL"))
     for note in dq["notes"]:
         print(f"  note: {note}")
     print(f"wrote {path} and {path.parent / 'report.html'}")
@@ -436,8 +474,8 @@ def build_parser() -> argparse.ArgumentParser:
     i = sub.add_parser("identify", help="identify from a case file (DESIGN.md §4.2) and write report.json, report.html, plots")
     i.add_argument("case", help="case file (TOML)")
     i.add_argument("--out", required=True, help="folder for the report")
-    i.add_argument("--stage", default="frequency-response", choices=["frequency-response"],
-                   help="last stage to run (more stages come with the parametric issues)")
+    i.add_argument("--stage", default="verification", choices=list(STAGES),
+                   help="last stage to run (default: every stage the case defines)")
     i.set_defaults(func=cmd_identify)
 
     d = sub.add_parser("demo", help="fly simulated XV-15 sweeps live into the monitor, record them, identify frequency responses")

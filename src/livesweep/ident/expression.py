@@ -302,11 +302,11 @@ def _affine(node: Node):
 def _forward(node: Node, theta: np.ndarray):
     """(value, gradient) of a resolved tree by forward-mode differentiation."""
     if isinstance(node, Num):
-        return node.value, np.zeros(theta.size)
+        return np.float64(node.value), np.zeros(theta.size)
     if isinstance(node, _Param):
         g = np.zeros(theta.size)
         g[node.index] = 1.0
-        return float(theta[node.index]), g
+        return np.float64(theta[node.index]), g
     if isinstance(node, Neg):
         v, g = _forward(node.operand, theta)
         return -v, -g
@@ -318,7 +318,7 @@ def _forward(node: Node, theta: np.ndarray):
         return a - b, ga - gb
     if node.op == "*":
         return a * b, ga * b + a * gb
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         return a / b, (ga * b - a * gb) / (b * b)
 
 
@@ -356,7 +356,8 @@ class CompiledEntry:
         if self.affine is not None:
             c0, terms = self.affine
             return c0 + sum(c * theta[k] for k, c in terms)
-        return float(_forward(self.tree, np.asarray(theta, float))[0])
+        with np.errstate(all="ignore"):
+            return float(_forward(self.tree, np.asarray(theta, float))[0])
 
     def value_and_gradient(self, theta):
         """``(value, d value / d theta)`` for the full parameter vector ``theta`` (exact)."""
@@ -367,7 +368,8 @@ class CompiledEntry:
             for k, c in terms:
                 g[k] += c
             return c0 + float(g @ theta), g
-        v, g = _forward(self.tree, theta)
+        with np.errstate(all="ignore"):
+            v, g = _forward(self.tree, theta)
         return float(v), g
 
 

@@ -62,18 +62,42 @@ def _atomic_write(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
-def write_frequency_report(stage, out_dir) -> Path:
-    """Write the frequency-response stage's report; returns the path of ``report.json``."""
+def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_space=None, verification=None) -> Path:
+    """Write the report of the stages run; returns the path of ``report.json``.
+
+    Parameters
+    ----------
+    stage : FrequencyResponseStage
+    out_dir : str or Path
+    transfer_functions : TransferFunctionStage, optional
+    state_space : StateSpaceStage, optional
+        Needs ``.fit`` (StateSpaceFit) and ``.pairs``.
+    verification : VerificationStage, optional
+        Needs ``.results``: list of (label, Verification).
+    """
     out = prepare_out_dir(out_dir)
     case, an = stage.case, stage.analysis
     best = an.best
     units = {n: s.units for n, s in case.signals.items()}
     responses, plots = [], []
+    tf_fits = list(transfer_functions.fits) if transfer_functions is not None else []
+    ss_fit = state_space.fit if state_space is not None else None
     for pair in best.pairs():
         ordinary = an.siso.pair(pair.output, pair.input) if best.conditioned else None
         rel = f"plots/{pair.output}_{pair.input}.png"
+        models, band = [], None
+        for f in tf_fits:
+            if (f.output, f.input) == (pair.output, pair.input):
+                models.append((f"TF {f.name} (J {f.cost:.0f})", pair.omega, f.response(pair.omega)))
+                band = f.band_rad_s
+        ssm = ss_fit.model if ss_fit is not None else None
+        if ssm is not None and pair.output in ssm.outputs and pair.input in ssm.inputs:
+            T = ss_fit.frequency_response(pair.omega)[list(ssm.outputs).index(pair.output), list(ssm.inputs).index(pair.input)]
+            j = next((c for o, i, c in ss_fit.cost_pairs if (o, i) == (pair.output, pair.input)), None)
+            models.append(("state space" + (f" (J {j:.0f})" if j is not None else ""), pair.omega, T))
         bode_plot(pair, out / rel, title=f"{case.name}: {pair.output} / {pair.input}",
-                  units=(units.get(pair.output, ""), units.get(pair.input, "")), ordinary=ordinary)
+                  units=(units.get(pair.output, ""), units.get(pair.input, "")), ordinary=ordinary,
+                  models=models, fit_band_rad_s=band)
         responses.append({**pair.to_dict(), "output_units": units.get(pair.output, ""),
                           "input_units": units.get(pair.input, ""), "plot": rel})
         plots.append(rel)
@@ -85,6 +109,29 @@ def write_frequency_report(stage, out_dir) -> Path:
         "spectral_settings": best.settings,
         "data_quality": stage.data_quality,
     }
+    stages = report["stages"]
+    if transfer_functions is not None:
+        stages.append("transfer-functions")
+        report["transfer_functions"] = [f.to_dict() for f in tf_fits]
+        report["data_quality"]["notes"] = list(report["data_quality"]["notes"]) + list(transfer_functions.notes)
+    if ss_fit is not None:
+        stages.append("state-space")
+        report["state_space"] = ss_fit.to_dict()
+        report["data_quality"]["notes"] = list(report["data_quality"]["notes"]) + list(state_space.notes)
+    if verification is not None:
+        stages.append("verification")
+        from livesweep.report.plots import time_history_plot
+
+        records = []
+        for k, (label, v) in enumerate(verification.results):
+            rel = f"plots/verification_{k}.png"
+            time_history_plot(v.t_s, v.measured, v.predicted, v.inputs, [o.name for o in v.outputs],
+                              [o.units for o in v.outputs], list(verification.inputs), out / rel,
+                              title=f"{case.name}: verification, {label}", tic=[o.tic for o in v.outputs])
+            records.append({"label": label, **v.to_dict(), "plot": rel})
+        first = records[0] if records else {}
+        report["verification"] = {**{k: first.get(k) for k in ("outputs", "j_rms", "passed", "guidelines")},
+                                  "records": records}
     if best.conditioned:
         report["frequency_responses_ordinary"] = [p.to_dict() for p in an.siso.pairs()]
         report["multiple_coherence"] = {o: best.multiple_coherence[k].tolist() for k, o in enumerate(best.outputs)}
@@ -113,6 +160,7 @@ def _html(report: dict) -> str:
     notes = "".join(f"<li>{e(n)}</li>" for n in report["data_quality"]["notes"]) or "<li>none</li>"
     imgs = "".join(f'<figure><img src="{e(r["plot"])}" width="600"><figcaption>{e(r["output"])}/{e(r["input"])}'
                    f'</figcaption></figure>' for r in report["frequency_responses"])
+    extra = _html_parametric(report)
     c = report["case"]
     return f"""<!doctype html><html><head><meta charset="utf-8"><title>livesweep: {e(c['name'])}</title>
 <style>body{{font-family:sans-serif;max-width:1300px;margin:auto}}table{{border-collapse:collapse}}
@@ -121,4 +169,61 @@ td,th{{border:1px solid #ccc;padding:3px 8px}}figure{{display:inline-block;margi
 <h2>Excitation adequacy (γ² ≥ 0.6, ε ≤ 0.2)</h2><table><tr><th>pair</th><th>of band</th><th>widest band [rad/s]</th>
 <th>median γ²</th></tr>{''.join(rows)}</table>
 <h2>Kinematic consistency</h2><table><tr><th>check</th><th>scale error</th><th>skew [s]</th><th>rate bias</th><th></th></tr>
-{checks}</table><h2>Notes</h2><ul>{notes}</ul><h2>Frequency responses</h2>{imgs}</body></html>"""
+{checks}</table><h2>Notes</h2><ul>{notes}</ul>{extra}<h2>Frequency responses</h2>{imgs}</body></html>"""
+
+
+def _flag(ok: bool) -> str:
+    return "" if ok else ' style="background:#fdd"'
+
+
+def _html_parametric(report: dict) -> str:
+    """Transfer-function, derivative and verification tables, flagged against the guidelines."""
+    e = html.escape
+    parts = []
+    tfs = report.get("transfer_functions") or []
+    if tfs:
+        rows = "".join(
+            f"<tr><td>{e(t['name'])}</td><td>{e(t['output'])}/{e(t['input'])}</td><td>{t['gain']:.4g}</td>"
+            f"<td>{e('; '.join(_factor_text(f) for f in t.get('factors', [])))}</td><td>{1000 * t['delay_s']:.1f}</td>"
+            f"<td{_flag(t['cost'] <= 100)}>{t['cost']:.1f}</td>"
+            f"<td>{e(', '.join(f'{k} {v:.0f}%' for k, v in (t.get('cramer_rao_pct') or {}).items() if v is not None))}</td></tr>"
+            for t in tfs)
+        parts.append("<h2>Transfer functions</h2><p>J &le; 100 acceptable, &le; 50 excellent (method.md §7.2); "
+                     "Cram&eacute;r&ndash;Rao bounds in % of the value.</p><table><tr><th>name</th><th>pair</th>"
+                     f"<th>gain</th><th>factors</th><th>&tau; [ms]</th><th>J</th><th>CR %</th></tr>{rows}</table>")
+    ss = report.get("state_space")
+    if ss:
+        rows = "".join(
+            f"<tr><td>{e(p['name'])}</td><td>{p['value']:.5g}</td><td>{'fixed' if p['fixed'] else ''}</td>"
+            f"<td{_flag(p.get('cramer_rao_pct') is None or p['cramer_rao_pct'] <= 20)}>"
+            f"{'' if p.get('cramer_rao_pct') is None else '%.1f' % p['cramer_rao_pct']}</td>"
+            f"<td{_flag(p.get('insensitivity_pct') is None or p['insensitivity_pct'] <= 10)}>"
+            f"{'' if p.get('insensitivity_pct') is None else '%.1f' % p['insensitivity_pct']}</td></tr>"
+            for p in ss["parameters"])
+        cost = ss["cost"]
+        pairs = ", ".join(f"{c['output']}/{c['input']} {c['cost']:.0f}" for c in cost["pairs"])
+        parts.append(f"<h2>State-space derivatives</h2><p>J<sub>ave</sub> = {cost['average']:.1f} "
+                     f"(&le; 100 guideline); per pair: {e(pairs)}. Flagged: CR % &gt; 20, insensitivity % &gt; 10 "
+                     f"(method.md §8.4). Removed in structure reduction: {e(', '.join(ss.get('removed_parameters') or []) or 'none')}."
+                     "</p><table><tr><th>parameter</th><th>value</th><th></th><th>CR %</th><th>I %</th></tr>"
+                     f"{rows}</table>")
+    ver = report.get("verification")
+    if ver:
+        blocks = []
+        for r in ver["records"]:
+            tics = ", ".join(f"{o['name']} {o['tic']:.3f}" for o in r["outputs"])
+            blocks.append(f"<p{_flag(bool(r.get('passed')))}>{e(r['label'])}: J<sub>rms</sub> {r['j_rms']:.3f}, "
+                          f"TIC {e(tics)} &mdash; {'passes' if r.get('passed') else 'FAILS'} the guidelines</p>"
+                          f'<img src="{e(r["plot"])}" width="700">')
+        parts.append("<h2>Time-domain verification</h2><p>Dissimilar manoeuvres, no parameter changed; biases and "
+                     "reference shifts by least squares (method.md §9). Guidelines: J<sub>rms</sub> &le; 2, TIC &le; 0.25."
+                     "</p>" + "".join(blocks))
+    return "".join(parts)
+
+
+def _factor_text(f: dict) -> str:
+    if f.get("kind") == "second":
+        return f"[{f.get('zeta', float('nan')):.3g}, {f.get('omega', float('nan')):.3g}]"
+    if f.get("kind") == "first":
+        return f"(1/T = {f.get('inverse_time_constant', float('nan')):.3g})"
+    return str(f.get("kind", ""))

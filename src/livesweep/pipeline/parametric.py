@@ -1,0 +1,152 @@
+"""The parametric stages of ``livesweep identify``: transfer functions, state space, verification.
+
+Glue between the case file, the frequency-response stage's results and the pure fitters in
+``livesweep.ident``; every table the case names is validated here with errors naming file and key.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from livesweep.config import Case
+from livesweep.errors import ConfigError
+from livesweep.ident.cost import fit_points
+from livesweep.ident.transfer_function import TransferFunctionModel, fit_transfer_function
+from livesweep.spectral.response import FrequencyResponseSet
+
+__all__ = ["TransferFunctionStage", "run_transfer_function_stage"]
+
+_TF_KEYS = {"output", "input", "numerator", "denominator", "delay", "band_rad_s"}
+
+
+@dataclass(frozen=True)
+class TransferFunctionStage:
+    """Fitted transfer functions and the data points each was fitted to."""
+
+    fits: tuple
+    pairs: dict          # name -> PairData
+    notes: tuple
+
+
+def _tf_table(case: Case, name: str, raw) -> dict:
+    where = f"{case.path}: transfer_functions.{name}"
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{where}: must be a table, got {raw!r}")
+    unknown = sorted(set(raw) - _TF_KEYS)
+    if unknown:
+        raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)}; known: {', '.join(sorted(_TF_KEYS))}")
+    for key in ("output", "input", "denominator"):
+        if not isinstance(raw.get(key), str):
+            raise ConfigError(f"{where}.{key}: required, a string, got {raw.get(key)!r}")
+    band = raw.get("band_rad_s")
+    if band is not None and (not isinstance(band, list) or len(band) != 2 or not 0 < band[0] < band[1]):
+        raise ConfigError(f"{where}.band_rad_s: must be [low, high] with 0 < low < high, got {band!r}")
+    return raw
+
+
+def run_transfer_function_stage(case: Case, frs: FrequencyResponseSet) -> TransferFunctionStage | None:
+    """Fit every ``[transfer_functions.*]`` of the case; models with the same denominator text
+    are fitted together with a shared denominator (the seed's Eq. 2.7). None when the case has none."""
+    tables = case.tables.get("transfer_functions") or {}
+    if not tables:
+        return None
+    groups: dict[str, list] = {}
+    pairs = {}
+    for name, raw in tables.items():
+        t = _tf_table(case, name, raw)
+        if t["output"] not in frs.outputs or t["input"] not in frs.inputs:
+            raise ConfigError(f"{case.path}: transfer_functions.{name}: pair {t['output']}/{t['input']} is not among "
+                              f"the frequency responses (outputs {list(frs.outputs)}, inputs {list(frs.inputs)})")
+        pd = fit_points(frs.pair(t["output"], t["input"]), band_rad_s=t.get("band_rad_s"))
+        model = TransferFunctionModel(name=name, numerator=t.get("numerator", ""), denominator=t["denominator"],
+                                      delay=bool(t.get("delay", True)), output=t["output"], input=t["input"])
+        groups.setdefault(" ".join(t["denominator"].split()), []).append((pd, model))
+        pairs[name] = pd
+    fits, notes = [], []
+    for members in groups.values():
+        result = fit_transfer_function([pd for pd, _ in members], [m for _, m in members])
+        for f in result:
+            if not f.converged:
+                notes.append(f"transfer function {f.name}: the fit did not converge ({f.message})")
+        fits.extend(result)
+    return TransferFunctionStage(tuple(fits), pairs, tuple(notes))
+
+
+@dataclass(frozen=True)
+class StateSpaceStage:
+    """The fitted (and structure-reduced) state-space model."""
+
+    model: object        # StateSpaceModel as written in the case
+    fit: object          # StateSpaceFit after structure reduction
+    full_fit: object     # StateSpaceFit before it
+    skipped_pairs: tuple
+    notes: tuple
+
+
+def run_state_space_stage(case: Case, frs: FrequencyResponseSet, *, reduce: bool = True,
+                          progress=None) -> StateSpaceStage | None:
+    """Fit the case's ``[state_space]`` model to the frequency responses, then reduce its structure.
+
+    None when the case has no ``[state_space]`` table.
+    """
+    from livesweep.ident.state_space import (StateSpaceModel, a_priori_eliminations, fit_state_space,
+                                             reduce_structure, select_pairs)
+
+    table = case.tables.get("state_space")
+    if not table:
+        return None
+    model = StateSpaceModel.from_table(table, where=f"{case.path}: state_space")
+    pairs, skipped = select_pairs(frs, model)
+    if not pairs:
+        raise ConfigError(f"{case.path}: state_space: none of the model's pairs has usable coherence")
+    notes = [f"pair {o}/{i} not fitted: {why}" for o, i, why in skipped]
+    eliminated = a_priori_eliminations(model, skipped)
+    if eliminated:
+        model = model.with_values(fixed=eliminated)
+        notes.append(f"removed a priori (their pairs have no coherence): {', '.join(sorted(eliminated))}")
+    if progress:
+        progress(f"state space: fitting {len(model.free_names)} parameters to {len(pairs)} pairs")
+    full = fit_state_space(model, pairs, skipped_pairs=skipped)
+    if not full.converged:
+        notes.append(f"the state-space fit did not converge: {full.message}")
+    fit = full
+    if reduce:
+        if progress:
+            progress("state space: model-structure reduction")
+        fit = reduce_structure(model, pairs, full)
+    return StateSpaceStage(model, fit, full, tuple(skipped), tuple(notes))
+
+
+@dataclass(frozen=True)
+class VerificationStage:
+    """Time-domain verification on the case's ``[[verify]]`` records, one result per record."""
+
+    results: tuple       # (label, Verification)
+    inputs: tuple
+    outputs: tuple
+
+
+def run_verification_stage(case: Case, ss: StateSpaceStage, sample_rate_hz: float) -> VerificationStage | None:
+    """Drive the identified model open loop with each verification record's measured inputs."""
+    from livesweep.ident.verify import verify
+    from livesweep.pipeline.frequency_response import load_record
+
+    if not case.verify or ss is None:
+        return None
+    model, theta = ss.fit.model, ss.fit.theta
+    M, F, G, H, J, tau = model.matrices(theta)
+    inputs, outputs = tuple(model.inputs), tuple(model.outputs)
+    units = [case.signals[o].units if o in case.signals else "" for o in outputs]
+    results = []
+    for rec in case.verify:
+        data = load_record(case, (rec,), [*inputs, *outputs], sample_rate_hz)
+        u = np.vstack([data.signal(n) for n in inputs])
+        y = np.vstack([data.signal(n) for n in outputs])
+        valid = data.all_valid()
+        u = np.where(np.isfinite(u), u, 0.0)
+        v = verify(M, F, G, H, J, np.asarray(tau, float), data.t_s, u, y, output_names=list(outputs),
+                   output_units=units, valid=valid)
+        results.append((rec.label or rec.log.name, v))
+    return VerificationStage(tuple(results), inputs, outputs)

@@ -1,0 +1,68 @@
+"""`livesweep identify` through every stage on the shipped XV-15 cruise case: transfer function,
+state-space derivatives against the seed's tables, structure reduction, verification, report."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from livesweep.sim.models import xv15_cruise
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def full_report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("full")
+    r = subprocess.run([sys.executable, "-m", "livesweep", "identify", str(ROOT / "config" / "xv15_cruise_lateral.toml"),
+                        "--out", str(out)], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    return out, json.loads((out / "report.json").read_text()), r.stdout
+
+
+def test_every_stage_ran_and_showed_progress(full_report):
+    out, rep, stdout = full_report
+    assert rep["stages"] == ["frequency-response", "transfer-functions", "state-space", "verification"]
+    assert stdout.count("] ") >= 5 and "writing the report" in stdout
+    html = (out / "report.html").read_text()
+    for section in ("Transfer functions", "State-space derivatives", "Time-domain verification"):
+        assert section in html
+    assert (out / rep["verification"]["records"][0]["plot"]).read_bytes()[:4] == b"\x89PNG"
+
+
+def test_transfer_function_p_da_matches_the_model_high_frequency_gain_and_delay(full_report):
+    _, rep, _ = full_report
+    tf = next(t for t in rep["transfer_functions"] if t["name"] == "p_da")
+    m = xv15_cruise()
+    assert tf["gain"] == pytest.approx(m.derivatives["Lda"] * 180 / np.pi, rel=0.05)   # L_da in deg/s^2/deg
+    assert tf["delay_s"] == pytest.approx(m.input_delays_s[0], abs=0.005)
+    assert tf["cost"] <= 50
+    assert {tuple(z) for z in tf["zeros"]} and len(tf["poles"]) == 4
+
+
+def test_state_space_recovers_the_seed_tables_within_three_cramer_rao_bounds(full_report):
+    _, rep, _ = full_report
+    ss = rep["state_space"]
+    truth = {**xv15_cruise().derivatives, "tau_a": 0.0892, "tau_r": 0.03276}
+    params = {p["name"]: p for p in ss["parameters"]}
+    assert ss["cost"]["average"] <= 50
+    for name in ("Lp", "Lda", "Nr", "Ndr", "Lv", "Nv"):
+        assert params[name]["cramer_rao_pct"] < 20, name
+    for name, p in params.items():
+        if p["fixed"] or name not in truth:
+            continue
+        cr = abs(p["value"]) * p["cramer_rao_pct"] / 100
+        assert abs(p["value"] - truth[name]) <= 3 * cr + 1e-12, (name, p["value"], truth[name], cr)
+    removed = set(ss["removed_parameters"])
+    assert removed & {"Lr", "Yda"}                           # truly zero in the tables
+    assert not removed & {"Lp", "Lda", "Nr", "Ndr", "Lv", "Nv", "Yv", "Np"}
+
+
+def test_identified_model_passes_verification_on_the_calm_air_doublets(full_report):
+    _, rep, _ = full_report
+    v = rep["verification"]["records"][0]
+    assert v["passed"] and v["j_rms"] <= 2.0
+    assert all(o["tic"] <= 0.25 for o in v["outputs"])

@@ -1,0 +1,451 @@
+"""State-space identification (DERIVID, method.md §8) against the XV-15 truth of the simulator.
+
+The acceptance data are the shipped sample logs (replay_logs/, simulated from
+livesweep.sim.models with the seed's Tables 2.1-2.4; Lr = Yda = 0 in cruise; Yr = Lr = Ydr = Ldr =
+0 in hover), run through the frequency-response stage of the shipped case files. Tolerances are
+Cramer-Rao bounds (raw normalisation, calibrated by the Monte-Carlo test at the end).
+"""
+
+import copy
+import json
+import time
+
+import numpy as np
+import pytest
+import control
+
+from livesweep.config import load_case
+from livesweep.errors import ConfigError
+from livesweep.ident.accuracy import MONTE_CARLO_SCATTER_OVER_CR, accuracy_from_jacobian
+from livesweep.ident.state_space import (StateSpaceModel, _Problem, a_priori_eliminations, equation_error_start,
+                                         fit_state_space, reduce_structure, select_pairs)
+from livesweep.pipeline.frequency_response import run_frequency_response_stage
+from livesweep.sim.models import xv15_cruise, xv15_hover
+from livesweep.sim.scenario import simulate, sweep_scenario
+from livesweep.spectral.analysis import analyze
+
+CRUISE = "config/xv15_cruise_lateral.toml"
+HOVER = "config/xv15_hover_lateral.toml"
+
+
+def _truth_values(truth):
+    d = dict(truth.derivatives)
+    d["tau_a"], d["tau_r"] = truth.input_delays_s
+    return d
+
+
+CRUISE_TRUTH = _truth_values(xv15_cruise())
+HOVER_TRUTH = _truth_values(xv15_hover())
+
+
+@pytest.fixture(scope="module")
+def cruise():
+    case = load_case(CRUISE)
+    st = run_frequency_response_stage(case)
+    return case, st.analysis.best
+
+
+@pytest.fixture(scope="module")
+def hover():
+    case = load_case(HOVER)
+    st = run_frequency_response_stage(case)
+    return case, st.analysis.best
+
+
+def _table(path):
+    return copy.deepcopy(load_case(path).tables["state_space"])
+
+
+def _report(fit, truth):
+    lines = [f"J_ave = {fit.cost_average:.2f}; converged {fit.converged}; {fit.message}"]
+    for q in fit.parameters:
+        t = truth.get(q.name, np.nan)
+        k = (q.value - t) / q.cramer_rao if not q.fixed else np.nan
+        lines.append(f"  {q.name:6s} {q.value:+11.5g} truth {t:+11.5g}  CR {q.cramer_rao:9.3g}  CR% {q.cramer_rao_pct:7.2f}"
+                     f"  I% {q.insensitivity_pct:7.2f}  (est-truth)/CR {k:+6.2f}{'  fixed' if q.fixed else ''}")
+    return "\n".join(lines)
+
+
+def _within_cr(fit, truth, k=3.0):
+    bad = [(q.name, q.value, truth[q.name], q.cramer_rao) for q in fit.parameters
+           if not q.fixed and not abs(q.value - truth[q.name]) <= k * q.cramer_rao]
+    assert not bad, f"outside {k} CR: {bad}\n{_report(fit, truth)}"
+
+
+# --- model construction and evaluation --------------------------------------------------------
+
+def test_shipped_cases_build_models():
+    m = StateSpaceModel.from_table(_table(CRUISE), CRUISE)
+    assert m.states == ("v", "p", "r", "phi") and m.inputs == ("da", "dr") and m.outputs == ("p", "r", "ay", "beta")
+    assert len(m.parameters) == 17 and not any(m.fixed)
+    assert m.delays == {"da": "tau_a", "dr": "tau_r"}
+    M, F, G, H, J, tau = m.matrices(m.initial)
+    assert F[0, 2] == pytest.approx(15.0 - 286.93) and F[0, 3] == pytest.approx(32.174)
+    assert H[3, 0] == pytest.approx(57.2958 / 286.93) and J[2, 1] == pytest.approx(-0.2)
+    np.testing.assert_allclose(tau, [0.08, 0.03])
+    assert [m.parameters[k] for k in m.delay_parameter_indices()] == ["tau_a", "tau_r"]
+    h = StateSpaceModel.from_table(_table(HOVER), HOVER)
+    assert h.outputs == ("p", "r", "ay", "v", "phi") and h.delays == {"da": None, "dr": None}
+    assert h.matrices(h.initial)[5].tolist() == [0.0, 0.0]
+
+
+@pytest.mark.parametrize("path, truth", [(CRUISE, xv15_cruise()), (HOVER, xv15_hover())])
+def test_frequency_response_equals_the_simulator_model(path, truth):
+    """The case's matrices at the truth values reproduce livesweep.sim.models' exact responses."""
+    m = StateSpaceModel.from_table(_table(path))
+    th = m.theta({k: v for k, v in _truth_values(truth).items() if k in m.parameters})
+    w = np.geomspace(0.05, 50, 77)
+    T = m.frequency_response(th, w)
+    ref = truth.frequency_response(w)[[truth.outputs.index(o) for o in m.outputs]]
+    np.testing.assert_allclose(T, ref, rtol=2e-5)       # H uses 57.2958 for 180/pi
+    np.testing.assert_allclose(m.eigenvalues(th), truth.eigenvalues(), rtol=2e-5)   # case U0 = 286.93 (sim 286.9277)
+
+
+def test_implicit_M_and_nonlinear_entries_against_python_control():
+    table = {
+        "states": ["x1", "x2"], "inputs": ["u"], "outputs": ["y1", "y2"],
+        "M": [["1", "-Zwd"], ["0", "m/2"]],
+        "F": [["a", "1"], ["-k*a", "-c/m"]],
+        "G": [["0"], ["b/(1 + a*a)"]],
+        "H": [["1", "0"], ["k", "c"]],
+        "J": [["0"], ["d"]],
+        "constants": {"m": 2.0},
+        "parameters": {"Zwd": {"value": 0.3}, "a": -0.5, "k": {"value": 4.0, "fixed": True}, "c": 0.8, "b": 1.5,
+                       "d": 0.1, "tau": 0.05},
+        "delays": {"u": "tau"},
+    }
+    m = StateSpaceModel.from_table(table)
+    th = m.initial
+    M, F, G, H, J, tau = m.matrices(th)
+    np.testing.assert_allclose(M, [[1, -0.3], [0, 1.0]])
+    np.testing.assert_allclose(G, [[0], [1.5 / 1.25]])
+    Mi = np.linalg.inv(M)
+    w = np.geomspace(0.1, 30, 40)
+    ref = control.ss(Mi @ F, Mi @ G, H, J)(1j * w) * np.exp(-1j * w * 0.05)
+    np.testing.assert_allclose(m.frequency_response(th, w), ref, rtol=1e-9)
+    np.testing.assert_allclose(m.eigenvalues(th), np.sort_complex(np.linalg.eigvals(Mi @ F)), rtol=1e-10)
+
+
+def test_exact_jacobian_against_central_differences(cruise):
+    _, frs = cruise
+    table = _table(CRUISE)
+    table["M"][1][0] = "Mvp"                                     # a parameter inside M as well
+    table["G"][1][0] = "Lda*(1 + Yda*Yda)"                       # and a non-affine entry
+    table["parameters"]["Mvp"] = {"value": 0.01}
+    m = StateSpaceModel.from_table(table)
+    pairs, _ = select_pairs(frs, m)
+    prob = _Problem(m, pairs)
+    th = m.initial.copy()
+    th[m.index("Yda")] = 0.3
+    free = m.free
+    r, D = prob.residuals_and_jacobian(th, free)
+    assert np.dot(r, r) == pytest.approx(sum(c for *_, c in prob.pair_costs(th)))
+    num = np.empty_like(D)
+    for a, k in enumerate(free):
+        h = 1e-6 * max(1.0, abs(th[k]))
+        tp, tm = th.copy(), th.copy()
+        tp[k] += h
+        tm[k] -= h
+        num[:, a] = (prob.residuals(tp) - prob.residuals(tm)) / (2 * h)
+    np.testing.assert_allclose(D, num, rtol=1e-5, atol=1e-6 * np.abs(num).max())
+
+
+# --- bad input ---------------------------------------------------------------------------------
+
+def _bad(mutate, match):
+    table = _table(CRUISE)
+    mutate(table)
+    with pytest.raises(ConfigError, match=match):
+        StateSpaceModel.from_table(table, "cruise.toml [state_space]")
+
+
+def test_unknown_name_in_an_entry():
+    def f(t):
+        t["F"][0][2] = "Yr - U1"
+    _bad(f, r"F\[0\]\[2\] = 'Yr - U1': unknown name 'U1'")
+
+
+def test_non_arithmetic_entries():
+    def f(t):
+        t["G"][1][0] = "Lda**2"
+    _bad(f, r"G\[1\]\[0\] = 'Lda\*\*2': unexpected")
+
+    def g(t):
+        t["H"][2][0] = "abs(Yv)"
+    _bad(g, r"H\[2\]\[0\] = 'abs\(Yv\)': unexpected '\('")
+
+    def e(t):
+        t["J"][0][1] = ""
+    _bad(e, r"J\[0\]\[1\] = '': empty expression")
+
+
+@pytest.mark.parametrize("key, mutate, match", [
+    ("F rows", lambda t: t["F"].pop(), r"F has 3 rows, expected 4 \(one per state\)"),
+    ("G cols", lambda t: t["G"][2].append("0"), r"G\[2\] has 3 entries, expected 2 \(one per input\)"),
+    ("H rows", lambda t: t["H"].append(["0", "0", "0", "0"]), r"H has 5 rows, expected 4 \(one per output\)"),
+    ("J cols", lambda t: t["J"][1].pop(), r"J\[1\] has 1 entries, expected 2"),
+    ("M", lambda t: t.__setitem__("M", "identity"), r"M: must be a list of rows"),
+])
+def test_wrong_shapes(key, mutate, match):
+    _bad(mutate, match)
+
+
+def test_singular_M():
+    def f(t):
+        t["M"][3][3] = "0"
+    _bad(f, r"cruise.toml \[state_space\]: M is singular at the initial values")
+
+    def g(t):                                            # singular only at the given parameter value
+        t["M"][1][1] = "Mpp"
+        t["parameters"]["Mpp"] = {"value": 0.0}
+    _bad(g, "M is singular")
+
+
+def test_other_bad_tables():
+    _bad(lambda t: t.__setitem__("Q", []), r"unknown key\(s\) Q in \[state_space\]")
+    _bad(lambda t: t["parameters"].__setitem__("Yv", {"value": -0.3, "free": True}),
+         r"parameters.Yv: unknown key\(s\) free")
+    _bad(lambda t: t["parameters"].__setitem__("Yv", {"value": "big"}), r"parameters.Yv.value = 'big'")
+    _bad(lambda t: t["parameters"].__setitem__("Zz", {"value": 1.0}), "parameters.Zz: free but used in no matrix")
+    _bad(lambda t: t["delays"].__setitem__("de", "tau_e"), r"delays.de: not an input")
+    _bad(lambda t: t["delays"].__setitem__("da", "tau_x"), r"delays.da = 'tau_x': unknown name")
+    _bad(lambda t: t["constants"].__setitem__("U0", "fast"), r"constants.U0 = 'fast': must be a finite number")
+    _bad(lambda t: t.__setitem__("states", ["v", "p", "p", "phi"]), r"states = .*repeated name\(s\) p")
+    _bad(lambda t: t["parameters"].__setitem__("g", {"value": 1.0}), "parameters.g: the name is also a constant")
+
+    def nonfinite(t):
+        t["G"][0][0] = "Yda / Yv"
+        t["parameters"]["Yv"] = {"value": 0.0}
+    _bad(nonfinite, r"G\[0\]\[0\] = 'Yda / Yv': not finite at the initial values")
+
+    def bands(t):
+        t["bands"] = {"p/da": [2.0, 1.0]}
+    _bad(bands, r"bands.p/da = \[2.0, 1.0\]")
+
+
+# --- the XV-15 cruise acceptance ---------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def cruise_fit(cruise):
+    case, frs = cruise
+    model = StateSpaceModel.from_table(case.tables["state_space"], str(case.path))
+    pairs, skipped = select_pairs(frs, model)
+    t0 = time.perf_counter()
+    fit = fit_state_space(model, pairs, skipped_pairs=skipped)
+    elapsed = time.perf_counter() - t0
+    return model, pairs, fit, elapsed
+
+
+def test_cruise_recovers_tables_2_1_and_2_2(cruise_fit):
+    model, pairs, fit, elapsed = cruise_fit
+    print("\n" + _report(fit, CRUISE_TRUTH))
+    print(f"  fit of {len(pairs)} pairs, {model.free.size} parameters, with CR bounds: {elapsed:.3f} s")
+    assert len(pairs) == 8 and not fit.skipped_pairs
+    assert fit.converged, fit.message
+    assert fit.cost_average <= 50
+    assert all(c <= 100 for *_, c in fit.cost_pairs)
+    _within_cr(fit, CRUISE_TRUTH, 3.0)
+    for name in ("Lp", "Lda", "Nr", "Ndr", "Lv", "Nv"):
+        assert fit.parameter(name).cramer_rao_pct < 20, name
+    for q in fit.parameters:                                     # CR >= I always (method.md §8.4)
+        assert q.cramer_rao >= q.insensitivity * (1 - 1e-9)
+    # the identified modes are the truth's (Dutch roll, roll, spiral)
+    np.testing.assert_allclose(fit.eigenvalues, xv15_cruise().eigenvalues(), atol=0.08)
+    assert elapsed < 5.0
+
+
+def test_cruise_structure_reduction_removes_a_true_zero_and_keeps_the_real_ones(cruise_fit):
+    model, pairs, fit, _ = cruise_fit
+    t0 = time.perf_counter()
+    red = reduce_structure(model, pairs, fit)
+    elapsed = time.perf_counter() - t0
+    print("\n" + "\n".join(str(s) for s in red.removed))
+    print(_report(red, CRUISE_TRUTH))
+    print(f"  reduction: {elapsed:.3f} s")
+    removed = set(red.removed_parameters)
+    assert removed & {"Lr", "Yda"}, red.removed
+    # only truly-zero or (seed CR% 31 %) weakly determined Yp may go
+    assert removed <= {"Lr", "Yda", "Yp"}, red.removed
+    for name in ("Lp", "Lda", "Nr", "Ndr", "Lv", "Nv", "Yv", "Np", "Nda", "Ldr", "Ydr", "Yr", "tau_a", "tau_r"):
+        assert not red.parameter(name).fixed, name
+    for step in red.removed:
+        assert step["accepted"] == (step["delta_cost"] <= 2.0)
+        assert step["reason"] in ("insensitivity", "cramer_rao")
+    assert red.converged and red.cost_average <= 50
+    _within_cr(red, CRUISE_TRUTH, 3.0)
+    for q in red.parameters:
+        if q.fixed:
+            assert q.value == 0.0 and q.name in removed
+        else:
+            assert q.insensitivity_pct <= 10.0 and q.name not in removed
+    d = red.to_dict()
+    json.dumps(d, allow_nan=False)
+    assert d["removed_parameters"] == list(red.removed_parameters)
+    assert {p["name"] for p in d["parameters"]} == set(model.parameters)
+    assert len(d["cost"]["pairs"]) == 8 and d["cost"]["average"] == pytest.approx(red.cost_average)
+    assert all(len(e) == 2 for e in d["eigenvalues"]) and d["converged"] is True
+    assert {"cramer_rao_pct", "insensitivity_pct", "fixed", "value"} <= set(d["parameters"][0])
+
+
+def test_a_fit_that_does_not_converge_says_so(cruise_fit):
+    model, pairs, _, _ = cruise_fit
+    fit = fit_state_space(model, pairs, max_nfev=2)
+    assert fit.converged is False
+    assert "did not converge" in fit.message and "2 cost evaluations" in fit.message
+    assert fit.to_dict()["converged"] is False
+
+
+def test_lm_and_multistart_agree(cruise_fit):
+    model, pairs, fit, _ = cruise_fit
+    lm = fit_state_space(model, pairs, method="lm")
+    assert lm.converged and lm.cost_average == pytest.approx(fit.cost_average, rel=1e-5)
+    far = model.theta({"Lp": -2.0, "Nr": -0.2, "Yr": 40.0})
+    ms = fit_state_space(model, pairs, theta0=far, extra_starts=[model.initial])
+    assert "best of 2 starts" in ms.message and ms.cost_average == pytest.approx(fit.cost_average, rel=1e-5)
+    with pytest.raises(ConfigError, match="method 'bfgs'"):
+        fit_state_space(model, pairs, method="bfgs")
+
+
+def test_equation_error_start_when_the_case_gives_no_values(cruise, cruise_fit):
+    _, frs = cruise
+    _, _, fit, _ = cruise_fit
+    table = _table(CRUISE)
+    table["parameters"] = {name: {} for name in table["parameters"]}
+    model = StateSpaceModel.from_table(table)
+    assert set(model.unset) == set(model.parameters)
+    start = equation_error_start(model, frs)
+    for name in ("Lp", "Lda", "Nr", "Ndr", "Lv", "Nv", "Yv"):      # a rough but right-signed start
+        assert np.sign(start[model.index(name)]) == np.sign(CRUISE_TRUTH[name])
+    ee = fit_state_space(model, frs)
+    assert ee.converged and ee.cost_average == pytest.approx(fit.cost_average, rel=1e-6)
+
+
+# --- hover ---------------------------------------------------------------------------------------
+
+def test_hover_sample_logs_closed_loop(hover):
+    """Shipped hover logs: flown with a stabilising pilot in turbulence, so the low-frequency
+    responses are closed-loop biased. The control derivatives are recovered; the stability
+    derivatives are not (the truth model itself misfits the data below ~0.8 rad/s)."""
+    case, frs = hover
+    model = StateSpaceModel.from_table(case.tables["state_space"], str(case.path))
+    pairs, skipped = select_pairs(frs, model)
+    assert {(o, i) for o, i, _ in skipped} == {("p", "dr"), ("ay", "dr"), ("v", "dr"), ("phi", "dr")}
+    prior = a_priori_eliminations(model, skipped)
+    assert set(prior) == {"Ydr", "Ldr"}                       # both truly zero in the hover truth
+    model = model.with_values(fixed={name: 0.0 for name in prior})
+    fit = fit_state_space(model, pairs, skipped_pairs=skipped)
+    print("\n" + _report(fit, HOVER_TRUTH))
+    assert fit.converged and fit.cost_average <= 50
+    for name in ("Lda", "Nda", "Ndr"):
+        q = fit.parameter(name)
+        assert abs(q.value - HOVER_TRUTH[name]) <= 3 * q.cramer_rao and q.cramer_rao_pct < 20, name
+    # the data, not the fitter: the truth model misfits the coherent low-frequency data
+    th = model.theta({k: v for k, v in HOVER_TRUTH.items() if k in model.parameters})
+    j_all = np.mean([c for *_, c in _Problem(model, pairs).pair_costs(th)])
+    high, _ = select_pairs(frs, model, omega_range=(0.8, 100.0))
+    j_high = np.mean([c for *_, c in _Problem(model, high).pair_costs(th)])
+    print(f"  truth model J_ave: coherence bands {j_all:.1f}; bands above 0.8 rad/s {j_high:.1f}")
+    assert j_all > 50 and j_high < 10
+
+
+def _simulated_frs(model_name, amplitudes, band, windows, seed, turbulence=True):
+    """A sample-log-like test point flown in the simulator and analysed (MISO-conditioned)."""
+    sc = sweep_scenario(model_name, axes=("da", "dr"), repeats=2, omega_min_rad_s=band[0], omega_max_rad_s=band[1],
+                        duration_s=100.0, amplitudes=amplitudes, off_axis_rms=0.2, seed=seed, turbulence=turbulence)
+    res = simulate(sc)
+    names, rows = [], []
+    for name, sig in list(res.inputs.items()) + list(res.outputs.items()):
+        names.append(name)
+        rows.append(sig.values[::int(round(sig.rate_hz / 50.0))])
+    n = min(r.size for r in rows)
+    values = np.array([r[:n] for r in rows])
+    values -= values.mean(axis=1, keepdims=True)
+    return analyze(values, names, 50.0, ["da", "dr"], list(res.outputs), band, windows_s=windows).best
+
+
+def test_hover_open_loop_equivalent_data_recover_tables_2_3_and_2_4(hover):
+    """Same test point without turbulence: the pilot loop then sees no disturbance, the responses
+    are the open-loop ones, and the fit recovers the hover truth; the reduction removes exactly
+    its zeros."""
+    case, _ = hover
+    frs = _simulated_frs("xv15-hover", {"da": 1.5, "dr": 3.0}, (0.2, 12.0), (10.0, 20.0, 40.0, 80.0, 160.0), seed=21,
+                         turbulence=False)
+    model = StateSpaceModel.from_table(case.tables["state_space"], str(case.path))
+    pairs, skipped = select_pairs(frs, model)
+    fit = fit_state_space(model, pairs, skipped_pairs=skipped)
+    print("\n" + _report(fit, HOVER_TRUTH))
+    assert fit.converged and fit.cost_average <= 50
+    _within_cr(fit, HOVER_TRUTH, 3.0)
+    for name in ("Yv", "Lv", "Lp", "Yda", "Lda", "Nda", "Ndr"):
+        assert fit.parameter(name).cramer_rao_pct < 20, name
+    red = reduce_structure(model, pairs, fit)
+    print("\n".join(str(s) for s in red.removed))
+    print(_report(red, HOVER_TRUTH))
+    zeros = {"Yr", "Lr", "Ydr", "Ldr"}
+    removed = red.removed_parameters
+    # the four truly-zero parameters are the most insensitive and go first ...
+    assert set(removed[:4]) == zeros
+    # ... then at most the two the seed also found weakest (Np 29.9 %, Nv 7.7 % CR): here Nv goes
+    # at I% = 11.0 with dJ_ave = 1.9 (< 2), then Np -- the guideline loop is that blunt
+    assert set(removed) <= zeros | {"Nv", "Np"}
+    for name in ("Yv", "Yp", "Lv", "Lp", "Nr", "Yda", "Lda", "Nda", "Ndr"):
+        assert not red.parameter(name).fixed, name
+    assert red.cost_average <= 50
+
+
+# --- accuracy ------------------------------------------------------------------------------------
+
+def test_accuracy_formulas_on_a_linear_problem():
+    rng = np.random.default_rng(0)
+    D = rng.standard_normal((50, 3)) * [1.0, 10.0, 0.1]
+    D[:, 2] += 0.05 * D[:, 0]
+    theta = np.array([2.0, -0.5, 0.01])
+    acc = accuracy_from_jacobian(D, theta)
+    H = 2 * D.T @ D
+    C = np.linalg.inv(H)
+    np.testing.assert_allclose(acc.cramer_rao, np.sqrt(np.diag(C)), rtol=1e-10)
+    np.testing.assert_allclose(acc.insensitivity, 1 / np.sqrt(np.diag(H)), rtol=1e-12)
+    np.testing.assert_allclose(acc.cramer_rao_pct, 100 * np.sqrt(np.diag(C)) / np.abs(theta), rtol=1e-10)
+    np.testing.assert_allclose(acc.correlation, C / np.sqrt(np.outer(np.diag(C), np.diag(C))), atol=1e-12)
+    assert np.all(acc.cramer_rao >= acc.insensitivity)
+    # a parameter with no effect, and two that trade off exactly
+    D2 = np.column_stack([D[:, 0], D[:, 0], np.zeros(50), D[:, 1]])
+    acc2 = accuracy_from_jacobian(D2, np.array([1.0, 1.0, 1.0, 1.0]))
+    assert np.isinf(acc2.cramer_rao[:3]).all() and np.isinf(acc2.insensitivity[2])
+    K = 2 * np.column_stack([D[:, 0], D[:, 1]]).T @ np.column_stack([D[:, 0], D[:, 1]])   # theta0 + theta1, theta3
+    assert acc2.cramer_rao[3] == pytest.approx(np.sqrt(np.linalg.inv(K)[1, 1]), rel=1e-8)
+
+
+def test_cramer_rao_monte_carlo(cruise):
+    """Calibrate the raw CR normalisation: independent noisy realisations of the cruise test point
+    (turbulence, sensor noise, off-axis pilot noise; new seeds), identified with the cruise model
+    (Lr, Yda fixed at their true 0); scatter of the estimates vs the mean CR bound.
+
+    Measured with 80 realisations (seeds 200-279) while writing this test: median std/CR 0.68
+    (range 0.34 tau_a ... 1.50 Ldr), rms error/CR median 0.98 -- the yaw-axis Nv, Nr, Ndr carry a
+    systematic bias of ~2.5 CR (3-7 %) that the spectral chain introduces with turbulence.
+    """
+    case, _ = cruise
+    model = StateSpaceModel.from_table(case.tables["state_space"]).with_values(fixed={"Lr": 0.0, "Yda": 0.0})
+    est, crs = [], []
+    for seed in range(300, 310):
+        frs = _simulated_frs("xv15-cruise", {"da": 3.0, "dr": 5.0}, (0.3, 20.0), (7.0, 12.0, 20.0, 40.0, 80.0), seed)
+        pairs, _ = select_pairs(frs, model)
+        fit = fit_state_space(model, pairs)
+        assert fit.converged
+        est.append([q.value for q in fit.parameters])
+        crs.append([q.cramer_rao for q in fit.parameters])
+    est, crs = np.array(est), np.array(crs)
+    free = model.free
+    truth = np.array([CRUISE_TRUTH[n] for n in model.parameters])
+    ratio = est[:, free].std(axis=0, ddof=1) / crs[:, free].mean(axis=0)
+    rms = np.sqrt(np.mean((est[:, free] - truth[free]) ** 2, axis=0)) / crs[:, free].mean(axis=0)
+    for n, a, b in zip(model.free_names, ratio, rms):
+        print(f"  {n:6s} std/CR {a:5.2f}  rms(err)/CR {b:5.2f}")
+    factor = float(np.median(ratio))
+    print(f"  median std/CR = {factor:.2f} (documented {MONTE_CARLO_SCATTER_OVER_CR}); median rms/CR = "
+          f"{np.median(rms):.2f}")
+    # 10 realisations: each std/CR is within about +-50 % (chi, 9 dof, 99 %); the median is steadier
+    assert abs(factor - MONTE_CARLO_SCATTER_OVER_CR) <= 0.3
+    assert np.all(ratio < 3.0)
+    assert np.median(rms) < 1.6
