@@ -104,8 +104,8 @@ def run_state_space_stage(case: Case, frs: FrequencyResponseSet, *, reduce: bool
     notes = [f"pair {o}/{i} not fitted: {why}" for o, i, why in skipped]
     eliminated = a_priori_eliminations(model, skipped)
     if eliminated:
-        model = model.with_values(fixed=eliminated)
-        notes.append(f"removed a priori (their pairs have no coherence): {', '.join(sorted(eliminated))}")
+        model = model.with_values(fixed={name: 0.0 for name in eliminated})
+        notes += [f"{name} fixed at 0 a priori: {why}" for name, why in sorted(eliminated.items())]
     if progress:
         progress(f"state space: fitting {len(model.free_names)} parameters to {len(pairs)} pairs")
     full = fit_state_space(model, pairs, skipped_pairs=skipped)

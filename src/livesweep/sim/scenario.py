@@ -370,6 +370,7 @@ def sweep_scenario(
     seed: int = 0,
     trim_s: float = 3.0,
     lead_in_s: float = 5.0,
+    turbulence_scale: float = 1.0,
 ) -> Scenario:
     """``repeats`` computer-generated sweeps per axis, flown one after another.
 
@@ -394,6 +395,8 @@ def sweep_scenario(
         Trim before and after each sweep [s].
     lead_in_s : float
         Trim at the very start [s].
+    turbulence_scale : float
+        Multiplies the default turbulence.
     """
     m = get_model(model) if isinstance(model, str) else model
     if int(repeats) != repeats or repeats < 1:
@@ -411,7 +414,7 @@ def sweep_scenario(
                     for k, other in enumerate(m.inputs) if other != axis
                 )
             segments.append(Segment(f"{axis} sweep {r + 1}", "sweep", axis, sw, off))
-    return _standard_scenario(m, segments, effects, noise, turbulence, seed)
+    return _standard_scenario(m, segments, effects, noise, turbulence, seed, turbulence_scale)
 
 
 def verification_scenario(
