@@ -87,3 +87,17 @@ def test_hover_state_space_stage_removes_unmeasurable_derivatives_and_finds_the_
         p = ss.fit.parameter(name)
         assert p.cramer_rao_pct < 20
         assert abs(p.value - truth[name]) <= 3 * abs(p.value) * p.cramer_rao_pct / 100, name
+
+
+def test_handling_qualities_of_measured_and_fitted_p_da_agree_with_the_true_model(full_report):
+    """Bandwidth of the roll-attitude response (p/da integrated; method.md §10) from the measured and
+    the fitted response, against the same quantity of the exact model (the functions themselves are
+    checked against analytic systems in test_handling.py)."""
+    from livesweep.pipeline.parametric import handling_qualities
+
+    _, rep, _ = full_report
+    hq = next(t for t in rep["transfer_functions"] if t["name"] == "p_da")["handling_qualities"]
+    w = np.geomspace(0.3, 20, 400)
+    truth = handling_qualities(w, xv15_cruise().frequency_response(w)[0, 0])
+    for src in ("measured", "fitted"):
+        assert hq[src]["bandwidth_rad_s"] == pytest.approx(truth["bandwidth_rad_s"], rel=0.1), src

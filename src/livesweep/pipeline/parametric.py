@@ -23,11 +23,39 @@ _TF_KEYS = {"output", "input", "numerator", "denominator", "delay", "band_rad_s"
 
 @dataclass(frozen=True)
 class TransferFunctionStage:
-    """Fitted transfer functions and the data points each was fitted to."""
+    """Fitted transfer functions, the data points each was fitted to, and handling qualities."""
 
     fits: tuple
     pairs: dict          # name -> PairData
     notes: tuple
+    handling: dict = None   # name -> {"measured": {...}, "fitted": {...}}
+
+
+def handling_qualities(omega, H, *, coherence=None) -> dict:
+    """Bandwidth, phase delay and omega_180 of a response (method.md §10), for the report.
+
+    A rate response (the usual sweep pair, e.g. p/da) is integrated to the attitude response the
+    criteria are defined on; a negative gain (control sign convention) is flipped first. Values
+    are None where the crossing is not in the data.
+    """
+    from livesweep.ident.handling import bandwidth, phase_delay
+    from livesweep.spectral.response import FrequencyResponse
+
+    H = np.asarray(H, complex)
+    ok = np.isfinite(H)
+    sign = -1.0 if np.median(np.cos(np.angle(H[ok] * 1j * np.asarray(omega)[ok]))) < 0 else 1.0
+    coh = np.ones(H.shape) if coherence is None else np.asarray(coherence, float)
+    resp = FrequencyResponse("y", "u", np.asarray(omega, float), sign * H, coh, np.zeros(H.shape))
+    bw = bandwidth(resp, "rate", integrate=True, min_coherence=0.6 if coherence is not None else None)
+    tau_p = phase_delay(resp, integrate=True, min_coherence=0.6 if coherence is not None else None) \
+        if bw.omega_180 is not None else None
+
+    def num(x):
+        return None if x is None or not np.isfinite(x) else float(x)
+
+    return {"omega_180_rad_s": num(bw.omega_180), "bandwidth_gain_rad_s": num(bw.gain),
+            "bandwidth_phase_rad_s": num(bw.phase), "bandwidth_rad_s": num(bw.bandwidth),
+            "phase_delay_s": num(tau_p), "sign_flipped": sign < 0, "response": "attitude (rate / s)"}
 
 
 def _tf_table(case: Case, name: str, raw) -> dict:
@@ -71,7 +99,12 @@ def run_transfer_function_stage(case: Case, frs: FrequencyResponseSet) -> Transf
             if not f.converged:
                 notes.append(f"transfer function {f.name}: the fit did not converge ({f.message})")
         fits.extend(result)
-    return TransferFunctionStage(tuple(fits), pairs, tuple(notes))
+    handling = {}
+    for f in fits:
+        resp = frs.pair(f.output, f.input)
+        handling[f.name] = {"measured": handling_qualities(resp.omega, resp.H, coherence=resp.coherence),
+                            "fitted": handling_qualities(resp.omega, f.response(resp.omega))}
+    return TransferFunctionStage(tuple(fits), pairs, tuple(notes), handling)
 
 
 @dataclass(frozen=True)

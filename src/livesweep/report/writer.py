@@ -112,7 +112,8 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
     stages = report["stages"]
     if transfer_functions is not None:
         stages.append("transfer-functions")
-        report["transfer_functions"] = [f.to_dict() for f in tf_fits]
+        report["transfer_functions"] = [{**f.to_dict(), "handling_qualities": (transfer_functions.handling or {}).get(f.name)}
+                                        for f in tf_fits]
         report["data_quality"]["notes"] = list(report["data_quality"]["notes"]) + list(transfer_functions.notes)
     if ss_fit is not None:
         stages.append("state-space")
@@ -142,7 +143,7 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
         save_response_set(an.siso, out / ("ordinary_" + RESPONSE_SET_FILE))
     path = out / "report.json"
     _atomic_write(path, json.dumps(report, indent=1, allow_nan=False))
-    _atomic_write(out / "report.html", _html(report))
+    _atomic_write(out / "report.html", _embed_images(_html(report), out))
     return path
 
 
@@ -172,6 +173,20 @@ td,th{{border:1px solid #ccc;padding:3px 8px}}figure{{display:inline-block;margi
 {checks}</table><h2>Notes</h2><ul>{notes}</ul>{extra}<h2>Frequency responses</h2>{imgs}</body></html>"""
 
 
+def _embed_images(page: str, out: Path) -> str:
+    """Make the page self-contained: every ``src="plots/..png"`` becomes a base64 data URI."""
+    import base64
+    import re
+
+    def data_uri(m):
+        path = out / html.unescape(m.group(1))
+        if not path.is_file():
+            return m.group(0)
+        return 'src="data:image/png;base64,' + base64.b64encode(path.read_bytes()).decode() + '"'
+
+    return re.sub(r'src="(plots/[^"]+\.png)"', data_uri, page)
+
+
 def _flag(ok: bool) -> str:
     return "" if ok else ' style="background:#fdd"'
 
@@ -188,6 +203,19 @@ def _html_parametric(report: dict) -> str:
             f"<td{_flag(t['cost'] <= 100)}>{t['cost']:.1f}</td>"
             f"<td>{e(', '.join(f'{k} {v:.0f}%' for k, v in (t.get('cramer_rao_pct') or {}).items() if v is not None))}</td></tr>"
             for t in tfs)
+        hq = []
+        for t in tfs:
+            h = t.get("handling_qualities") or {}
+            def fmt(d, k, scale=1.0, unit=""):
+                v = (d or {}).get(k)
+                return "-" if v is None else f"{scale * v:.3g}{unit}"
+            hq.append(f"<tr><td>{e(t['name'])}</td>" + "".join(
+                f"<td>{fmt(h.get(src), 'bandwidth_rad_s')}</td><td>{fmt(h.get(src), 'phase_delay_s', 1000)}</td>"
+                for src in ("measured", "fitted")) + "</tr>")
+        parts.append("<h3>Handling qualities (attitude response, method.md §10)</h3><table><tr><th>pair</th>"
+                     "<th>&omega;<sub>BW</sub> measured [rad/s]</th><th>&tau;<sub>p</sub> measured [ms]</th>"
+                     "<th>&omega;<sub>BW</sub> fitted</th><th>&tau;<sub>p</sub> fitted [ms]</th></tr>"
+                     + "".join(hq) + "</table>")
         parts.append("<h2>Transfer functions</h2><p>J &le; 100 acceptable, &le; 50 excellent (method.md §7.2); "
                      "Cram&eacute;r&ndash;Rao bounds in % of the value.</p><table><tr><th>name</th><th>pair</th>"
                      f"<th>gain</th><th>factors</th><th>&tau; [ms]</th><th>J</th><th>CR %</th></tr>{rows}</table>")
