@@ -59,7 +59,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import expm
+
+from livesweep.lti import discretize_foh
 
 from livesweep.errors import ConfigError
 
@@ -247,14 +248,7 @@ def _state_matrices(M, F, G):
 
 def _discretize_foh(A, B, dt):
     """``x[k+1] = Phi x[k] + Gamma0 w[k] + Gamma1 w[k+1]`` for ``w`` linear between samples (exact)."""
-    n, m = A.shape[0], B.shape[1]
-    Z = np.zeros((n + 2 * m, n + 2 * m))
-    Z[:n, :n] = A * dt
-    Z[:n, n:n + m] = B * dt
-    Z[n:n + m, n + m:] = np.eye(m)
-    E = expm(Z)
-    Phi, Ga, Gb = E[:n, :n], E[:n, n:n + m], E[:n, n + m:]
-    return Phi, Ga - Gb, Gb
+    return discretize_foh(A, B, dt)
 
 
 def _delayed(u: np.ndarray, tau_s: np.ndarray, dt: float) -> np.ndarray:
@@ -455,7 +449,7 @@ def verify(M, F, G, H, J, tau, t_s, u, y, *, output_names, output_units=None, we
 
     # --- stacked weighted least squares for [b; y_ref; x0] ------------------------------------
     sw = np.sqrt(w)
-    rows, cols, rhs = [], [], []
+    rows, rhs = [], []
     for o in range(p):
         idx = np.flatnonzero(ok[o])
         reg = np.zeros((idx.size, n_unk))

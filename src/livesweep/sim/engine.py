@@ -22,9 +22,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import expm
 
 from livesweep.errors import ConfigError
+from livesweep.lti import discretize_foh, discretize_zoh
 from livesweep.sim.effects import (
     ActuatorLag,
     ActuatorSecondOrder,
@@ -212,19 +212,8 @@ def discretize(system: AugmentedSystem, dt: float):
     Phi, Gamma0, Gamma1, Gammaw : ndarray
         ``X[k+1] = Phi X[k] + Gamma0 u[k] + Gamma1 u[k+1] + Gammaw eta[k]``.
     """
-    A, B, Bw = system.A, system.B, system.Bw
-    n, m, q = A.shape[0], B.shape[1], Bw.shape[1]
-    M = np.zeros((n + 2 * m, n + 2 * m))
-    M[:n, :n] = A * dt
-    M[:n, n:n + m] = B * dt
-    M[n:n + m, n + m:] = np.eye(m)
-    E = expm(M)
-    Phi, Ga, Gb = E[:n, :n], E[:n, n:n + m], E[:n, n + m:]
-    Mw = np.zeros((n + q, n + q))
-    Mw[:n, :n] = A * dt
-    Mw[:n, n:] = Bw * dt
-    Gw = expm(Mw)[:n, n:]
-    return Phi, Ga - Gb, Gb, Gw
+    Phi, G0, G1 = discretize_foh(system.A, system.B, dt)
+    return Phi, G0, G1, discretize_zoh(system.A, system.Bw, dt)
 
 
 def shift(x: np.ndarray, delay_samples: float) -> np.ndarray:
