@@ -33,7 +33,9 @@ def test_demo_flies_the_sweeps_live_records_them_and_identifies(tmp_path):
     rep = json.loads((tmp_path / "demo" / "report" / "report.json").read_text())
     p_da = next(e for e in rep["data_quality"]["excitation"] if e["output"] == "p" and e["input"] == "da")
     assert p_da["fraction_of_band"] == 1.0
-
+    tf = rep["transfer_functions"][0]                     # the demo ends by identifying a model
+    assert tf["gain"] == pytest.approx(-0.07775 * 180 / 3.141592653589793, rel=0.05) and tf["cost"] <= 50
+    assert "transfer function p_da" in r.stdout and "report.html" in r.stdout
 
 def test_sim_writes_a_verification_log_with_an_effect(tmp_path):
     out = tmp_path / "v.mcap"

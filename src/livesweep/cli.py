@@ -131,6 +131,13 @@ inputs = ["da"]
 outputs = ["p", "r", "ay", "beta"]
 band_rad_s = [0.3, 20.0]
 sample_rate_hz = 50.0
+
+[transfer_functions.p_da]          # the seed's Eq. 2.7 roll-rate structure
+output = "p"
+input = "da"
+numerator = "s [zeta_phi, w_phi]"
+denominator = "(1/Ts) (1/Tr) [zeta_dr, w_dr]"
+delay = true
 """
 
 
