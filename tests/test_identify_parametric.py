@@ -101,3 +101,23 @@ def test_handling_qualities_of_measured_and_fitted_p_da_agree_with_the_true_mode
     truth = handling_qualities(w, xv15_cruise().frequency_response(w)[0, 0])
     for src in ("measured", "fitted"):
         assert hq[src]["bandwidth_rad_s"] == pytest.approx(truth["bandwidth_rad_s"], rel=0.1), src
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ('"Yr - U0"', '"Yr - U1"', "unknown name 'U1'"),
+    ('M = [["1","0","0","0"], ["0","1","0","0"]', 'M = [["1","0","0","0"], ["1","0","0","0"]', "singular"),
+    ('"57.2958/U0"', '"57.2958 ** U0"', "F"),
+])
+def test_bad_state_space_tables_are_one_line_errors_naming_the_entry(tmp_path, old, new, message):
+    text = (ROOT / "config" / "xv15_cruise_lateral.toml").read_text().replace("../replay_logs/", str(ROOT / "replay_logs") + "/")
+    assert old in text
+    case = tmp_path / "bad.toml"
+    case.write_text(text.replace(old, new, 1))
+    r = subprocess.run([sys.executable, "-m", "livesweep", "identify", str(case), "--out", str(tmp_path / "out")],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert r.stderr.startswith("livesweep: error: ") and "Traceback" not in r.stderr
+    if message != "F":
+        assert message in r.stderr
+    else:
+        assert "H[" in r.stderr and "57.2958 ** U0" in r.stderr      # names the entry and its text
