@@ -152,7 +152,7 @@ def test_exact_jacobian_against_central_differences(cruise):
 
 # --- bad input ---------------------------------------------------------------------------------
 
-def _bad(mutate, match):
+def _assert_raises_config_error(mutate, match):
     table = _table(CRUISE)
     mutate(table)
     with pytest.raises(ConfigError, match=match):
@@ -162,21 +162,21 @@ def _bad(mutate, match):
 def test_unknown_name_in_an_entry():
     def f(t):
         t["F"][0][2] = "Yr - U1"
-    _bad(f, r"F\[0\]\[2\] = 'Yr - U1': unknown name 'U1'")
+    _assert_raises_config_error(f, r"F\[0\]\[2\] = 'Yr - U1': unknown name 'U1'")
 
 
 def test_non_arithmetic_entries():
     def f(t):
         t["G"][1][0] = "Lda**2"
-    _bad(f, r"G\[1\]\[0\] = 'Lda\*\*2': unexpected")
+    _assert_raises_config_error(f, r"G\[1\]\[0\] = 'Lda\*\*2': unexpected")
 
     def g(t):
         t["H"][2][0] = "abs(Yv)"
-    _bad(g, r"H\[2\]\[0\] = 'abs\(Yv\)': unexpected '\('")
+    _assert_raises_config_error(g, r"H\[2\]\[0\] = 'abs\(Yv\)': unexpected '\('")
 
     def e(t):
         t["J"][0][1] = ""
-    _bad(e, r"J\[0\]\[1\] = '': empty expression")
+    _assert_raises_config_error(e, r"J\[0\]\[1\] = '': empty expression")
 
 
 @pytest.mark.parametrize("key, mutate, match", [
@@ -187,40 +187,40 @@ def test_non_arithmetic_entries():
     ("M", lambda t: t.__setitem__("M", "identity"), r"M: must be a list of rows"),
 ])
 def test_wrong_shapes(key, mutate, match):
-    _bad(mutate, match)
+    _assert_raises_config_error(mutate, match)
 
 
 def test_singular_M():
     def f(t):
         t["M"][3][3] = "0"
-    _bad(f, r"cruise.toml \[state_space\]: M is singular at the initial values")
+    _assert_raises_config_error(f, r"cruise.toml \[state_space\]: M is singular at the initial values")
 
     def g(t):                                            # singular only at the given parameter value
         t["M"][1][1] = "Mpp"
         t["parameters"]["Mpp"] = {"value": 0.0}
-    _bad(g, "M is singular")
+    _assert_raises_config_error(g, "M is singular")
 
 
 def test_other_bad_tables():
-    _bad(lambda t: t.__setitem__("Q", []), r"unknown key\(s\) Q in \[state_space\]")
-    _bad(lambda t: t["parameters"].__setitem__("Yv", {"value": -0.3, "free": True}),
+    _assert_raises_config_error(lambda t: t.__setitem__("Q", []), r"unknown key\(s\) Q in \[state_space\]")
+    _assert_raises_config_error(lambda t: t["parameters"].__setitem__("Yv", {"value": -0.3, "free": True}),
          r"parameters.Yv: unknown key\(s\) free")
-    _bad(lambda t: t["parameters"].__setitem__("Yv", {"value": "big"}), r"parameters.Yv.value = 'big'")
-    _bad(lambda t: t["parameters"].__setitem__("Zz", {"value": 1.0}), "parameters.Zz: free but used in no matrix")
-    _bad(lambda t: t["delays"].__setitem__("de", "tau_e"), r"delays.de: not an input")
-    _bad(lambda t: t["delays"].__setitem__("da", "tau_x"), r"delays.da = 'tau_x': unknown name")
-    _bad(lambda t: t["constants"].__setitem__("U0", "fast"), r"constants.U0 = 'fast': must be a finite number")
-    _bad(lambda t: t.__setitem__("states", ["v", "p", "p", "phi"]), r"states = .*repeated name\(s\) p")
-    _bad(lambda t: t["parameters"].__setitem__("g", {"value": 1.0}), "parameters.g: the name is also a constant")
+    _assert_raises_config_error(lambda t: t["parameters"].__setitem__("Yv", {"value": "big"}), r"parameters.Yv.value = 'big'")
+    _assert_raises_config_error(lambda t: t["parameters"].__setitem__("Zz", {"value": 1.0}), "parameters.Zz: free but used in no matrix")
+    _assert_raises_config_error(lambda t: t["delays"].__setitem__("de", "tau_e"), r"delays.de: not an input")
+    _assert_raises_config_error(lambda t: t["delays"].__setitem__("da", "tau_x"), r"delays.da = 'tau_x': unknown name")
+    _assert_raises_config_error(lambda t: t["constants"].__setitem__("U0", "fast"), r"constants.U0 = 'fast': must be a finite number")
+    _assert_raises_config_error(lambda t: t.__setitem__("states", ["v", "p", "p", "phi"]), r"states = .*repeated name\(s\) p")
+    _assert_raises_config_error(lambda t: t["parameters"].__setitem__("g", {"value": 1.0}), "parameters.g: the name is also a constant")
 
     def nonfinite(t):
         t["G"][0][0] = "Yda / Yv"
         t["parameters"]["Yv"] = {"value": 0.0}
-    _bad(nonfinite, r"G\[0\]\[0\] = 'Yda / Yv': not finite at the initial values")
+    _assert_raises_config_error(nonfinite, r"G\[0\]\[0\] = 'Yda / Yv': not finite at the initial values")
 
     def bands(t):
         t["bands"] = {"p/da": [2.0, 1.0]}
-    _bad(bands, r"bands.p/da = \[2.0, 1.0\]")
+    _assert_raises_config_error(bands, r"bands.p/da = \[2.0, 1.0\]")
 
 
 # --- the XV-15 cruise acceptance ---------------------------------------------------------------
