@@ -238,7 +238,7 @@ class MonitorPipeline:
         res = self.estimator.result()
         if res is None:
             return
-        frs = self._responses(res)
+        frs = res.best
         recent = {n: (np.asarray(tt), np.asarray(vv)) for n, (tt, vv) in self._recent.items()}
         lost = sum(self._packets_lost().values())
         gaps = self.aligner.counts["samples_invalid"]
@@ -267,22 +267,6 @@ class MonitorPipeline:
             self.publisher.publish("estimate", payload)
         if self.recorder is not None and self.totals.estimates % max(1, self.s.results_every) == 0:
             self.recorder.record_result("estimate", payload, log_time_ns=time.time_ns())
-
-    @staticmethod
-    def _responses(res):
-        """Conditioned responses when every input carries power; else the ordinary ones.
-
-        During a single-axis sweep the other inputs may be exactly quiet; conditioning on a zero
-        input is singular and would blank every pair, while the ordinary response of the swept
-        input is then exact (nothing correlated to remove).
-        """
-        if len(res.inputs) < 2:
-            return res.ordinary
-        auto = np.array([res.G[res.index(i), res.index(i)].real for i in res.inputs])
-        peak = float(np.max(auto)) if auto.size else 0.0
-        if peak <= 0 or np.any(np.median(auto, axis=-1) <= 1e-12 * peak):
-            return res.ordinary
-        return res.conditioned
 
     def _payload(self, est: Estimate, rows) -> dict:
         st = est.status

@@ -217,9 +217,20 @@ class OnlineResult:
 
     @property
     def best(self) -> FrequencyResponseSet:
-        """The conditioned set when there is one, else the ordinary set."""
-        c = self.conditioned
-        return c if c is not None else self.ordinary
+        """The conditioned set when there are several inputs and every one carries power, else the
+        ordinary set.
+
+        During a single-axis sweep the other inputs may be exactly quiet: conditioning on a zero
+        input is singular and would blank every pair, while the ordinary response of the swept
+        input is then exact (nothing correlated to remove).
+        """
+        if len(self.inputs) < 2:
+            return self.ordinary
+        auto = np.array([self.G[self.index(i), self.index(i)].real for i in self.inputs])
+        peak = float(np.max(auto)) if auto.size else 0.0
+        if peak <= 0 or np.any(np.median(auto, axis=-1) <= 1e-12 * peak):
+            return self.ordinary
+        return self.conditioned
 
 
 def _condition(G, idx_in, out, max_input_coherence, n_segments):
