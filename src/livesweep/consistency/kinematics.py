@@ -15,6 +15,7 @@ from scipy.interpolate import CubicSpline
 from scipy.optimize import minimize_scalar
 from scipy.signal import butter, detrend, sosfiltfilt
 
+from livesweep.consistency import usable_mask
 from livesweep.errors import ConfigError, require_number
 
 __all__ = ["euler_angle_rates", "KinematicCheck", "check_angle_against_rate"]
@@ -255,14 +256,7 @@ def check_angle_against_rate(
     if max_skew <= 0:
         raise ConfigError(f"angle/rate check {label}: max_skew_s must be > 0, got {max_skew_s!r}")
 
-    mask = np.isfinite(angle) & np.isfinite(rate)
-    if valid is not None:
-        v = np.asarray(valid)
-        if v.shape != angle.shape:
-            raise ConfigError(
-                f"angle/rate check {label}: valid mask has shape {v.shape}, the signals have shape {angle.shape}"
-            )
-        mask &= v.astype(bool)
+    mask = usable_mask(angle, valid, f"angle/rate check {label}") & np.isfinite(rate)
 
     sos = butter(2, [lo, hi], btype="bandpass", output="sos", fs=2 * math.pi * fs)
     padlen = 3 * (2 * len(sos) + 1)

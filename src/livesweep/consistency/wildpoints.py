@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
+from livesweep.consistency import usable_mask
 from livesweep.errors import ConfigError
 
 __all__ = ["WildPointReport", "replace_wild_points"]
@@ -125,14 +126,7 @@ def replace_wild_points(
     if not math.isfinite(ns) or ns <= 0:
         raise ConfigError(f"wild points: n_sigma for {label} must be finite and > 0, got {n_sigma!r}")
 
-    mask = np.isfinite(x)
-    if valid is not None:
-        v = np.asarray(valid)
-        if v.shape != x.shape:
-            raise ConfigError(
-                f"wild points: valid mask for {label} has shape {v.shape}, the signal has shape {x.shape}"
-            )
-        mask &= v.astype(bool)
+    mask = usable_mask(x, valid, f"wild points for {label}")
 
     def report(idx: np.ndarray) -> WildPointReport:
         idx = np.asarray(idx, dtype=np.intp)
