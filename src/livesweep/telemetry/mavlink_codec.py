@@ -361,6 +361,18 @@ class _LegacyGuard:
             self._ctx.__exit__(*exc)
 
 
+def _spec_with_fields(msgname: str, names) -> _Spec:
+    """The message's spec, after checking every given field name exists (ConfigError otherwise)."""
+    spec = _spec(msgname)
+    unknown = [k for k in names if k not in spec.by_name]
+    if unknown:
+        raise ConfigError(
+            f"MAVLink {msgname}: unknown field(s) {', '.join(map(repr, unknown))}; "
+            f"fields are {', '.join(spec.cls.fieldnames)}"
+        )
+    return spec
+
+
 def record_from_fields(msgname: str, fields: Mapping[str, Any], *, sysid: int, compid: int) -> dict[str, Any]:
     """Canonical record of message ``msgname`` from field values (see the module docstring).
 
@@ -368,13 +380,7 @@ def record_from_fields(msgname: str, fields: Mapping[str, Any], *, sysid: int, c
     Unknown field names, out-of-range or non-integer integers, non-numbers and strings too
     long for their ``char[n]`` raise :class:`ConfigError` naming message, field and value.
     """
-    spec = _spec(msgname)
-    unknown = [k for k in fields if k not in spec.by_name]
-    if unknown:
-        raise ConfigError(
-            f"MAVLink {msgname}: unknown field(s) {', '.join(map(repr, unknown))}; "
-            f"fields are {', '.join(spec.cls.fieldnames)}"
-        )
+    spec = _spec_with_fields(msgname, fields)
     rec: dict[str, Any] = {"sysid": _check_id("sysid", sysid), "compid": _check_id("compid", compid)}
     with _LegacyGuard():
         for f in spec.fields:
@@ -518,13 +524,7 @@ def records_from_columns(
     an array field, a 1-D array of its length) is broadcast to every row. Absent fields are
     0. Unknown names, length mismatches and bad values raise :class:`ConfigError`.
     """
-    spec = _spec(msgname)
-    unknown = [k for k in columns if k not in spec.by_name]
-    if unknown:
-        raise ConfigError(
-            f"MAVLink {msgname}: unknown field(s) {', '.join(map(repr, unknown))}; "
-            f"fields are {', '.join(spec.cls.fieldnames)}"
-        )
+    spec = _spec_with_fields(msgname, columns)
     sysid = _check_id("sysid", sysid)
     compid = _check_id("compid", compid)
 
