@@ -32,14 +32,18 @@ SAMPLE_LOGS = {
                                       turbulence_scale=0.3),
     ),
     "xv15_hover_sweeps_da.mcap": (
-        "XV-15 hover, SCAS off, pilot stabilising: two aileron sweeps 0.2-12 rad/s, 100 s each, +/-1.5 deg",
+        "XV-15 hover, SCAS off, pilot stabilising, calm air (30 % turbulence), sweep injection logged: "
+        "two aileron sweeps 0.2-12 rad/s, 100 s each, +/-1.5 deg",
         lambda: sweep_scenario("xv15-hover", axes=("da",), repeats=2, omega_min_rad_s=0.2, omega_max_rad_s=12.0,
-                               duration_s=100.0, amplitudes={"da": 1.5}, off_axis_rms=0.2, seed=21),
+                               duration_s=100.0, amplitudes={"da": 1.5}, off_axis_rms=0.2, seed=21,
+                               turbulence_scale=0.3),
     ),
     "xv15_hover_sweeps_dr.mcap": (
-        "XV-15 hover, SCAS off, pilot stabilising: two rudder sweeps 0.2-12 rad/s, 100 s each, +/-3 deg",
+        "XV-15 hover, SCAS off, pilot stabilising, calm air (30 % turbulence), sweep injection logged: "
+        "two rudder sweeps 0.2-12 rad/s, 100 s each, +/-3 deg",
         lambda: sweep_scenario("xv15-hover", axes=("dr",), repeats=2, omega_min_rad_s=0.2, omega_max_rad_s=12.0,
-                               duration_s=100.0, amplitudes={"dr": 3.0}, off_axis_rms=0.2, seed=22),
+                               duration_s=100.0, amplitudes={"dr": 3.0}, off_axis_rms=0.2, seed=22,
+                               turbulence_scale=0.3),
     ),
 }
 

@@ -186,7 +186,10 @@ class SimResult:
     ----------
     scenario : Scenario
     inputs : dict of str -> SampledSignal
-        Logged control commands at ``scenario.input_rate_hz``.
+        Logged control commands at ``scenario.input_rate_hz`` (with the pilot loop's feedback).
+    injections : dict of str -> SampledSignal
+        The exogenous part of each command (sweeps, doublets, off-axis noise: everything but the
+        pilot loop's feedback) at ``scenario.input_rate_hz``; equal to ``inputs`` without a pilot.
     outputs : dict of str -> SampledSignal
         Sensor measurements with every effect, noise included.
     segments : tuple of SegmentTimes
@@ -202,6 +205,7 @@ class SimResult:
 
     scenario: Scenario
     inputs: dict
+    injections: dict
     outputs: dict
     segments: tuple
     t_fine_s: np.ndarray
@@ -256,10 +260,12 @@ def simulate(scenario: Scenario) -> SimResult:
         )
     t_vehicle = scenario.boot_time_s + t_rel
 
-    inputs = {}
+    inputs, injections = {}, {}
     step_in = int(round(fs / scenario.input_rate_hz))
     for i, name in enumerate(model.inputs):
-        inputs[name] = SampledSignal(name, model.input_units[i], t_vehicle[::step_in].copy(), u_log[::step_in, i].copy())
+        t_in = t_vehicle[::step_in].copy()
+        inputs[name] = SampledSignal(name, model.input_units[i], t_in, u_log[::step_in, i].copy())
+        injections[name] = SampledSignal(name, model.input_units[i], t_in.copy(), u_cmd[::step_in, i].copy())
 
     outputs, injected = {}, {"spikes": {}, "dropouts": {}}
     out_rngs = {s.output: r for s, r in zip(scenario.sensors, rng_noise.spawn(len(scenario.sensors)))}
@@ -294,7 +300,7 @@ def simulate(scenario: Scenario) -> SimResult:
         outputs[s.output] = SampledSignal(s.output, model.output_units[j], t, y)
 
     return SimResult(
-        scenario=scenario, inputs=inputs, outputs=outputs, segments=tuple(seg_times),
+        scenario=scenario, inputs=inputs, injections=injections, outputs=outputs, segments=tuple(seg_times),
         t_fine_s=t_vehicle, u_fine=u_log, y_fine=y_dyn, injected=injected,
     )
 

@@ -14,6 +14,10 @@ message                rate      fields (simulator units -> MAVLink units)
                                  ``yaw`` = integral of r [rad]
 ``AOA_SSA``            beta      ``SSA`` = beta [deg], ``AOA`` = trim angle of attack [deg]
 ``ODOMETRY``           v         ``vy`` = v [m/s] body frame (FRD), ``vx`` = U0 [m/s]
+``DEBUG_VECT``         inputs    closed-loop test points only (a pilot loop flies them): the
+                                 exogenous injection (sweep, doublet, off-axis noise) before the
+                                 loop's feedback, ``name`` = ``"SWEEP_INJ"``, ``x``/``y``/``z`` =
+                                 da/de/dr [deg]; the common reference of method.md §4.6
 ``HEARTBEAT``          1 Hz      MAV_TYPE_VTOL_TILTROTOR
 =====================  ========  =================================================================
 
@@ -54,6 +58,8 @@ FT_TO_M = 0.3048
 G_M_S2 = 9.80665
 DEG2RAD = math.pi / 180.0
 SERVO_CHANNEL = {"da": "servo1_raw", "de": "servo2_raw", "dt": "servo3_raw", "dr": "servo4_raw"}
+INJECTION_NAME = "SWEEP_INJ"
+INJECTION_FIELD = {"da": "x", "de": "y", "dr": "z"}
 DEFAULT_START_UTC_NS = 1_778_594_400 * 10**9  # 2026-05-12T14:00:00Z, fixed so logs are reproducible
 MAV_TYPE_VTOL_TILTROTOR = 21
 MAV_FRAME_BODY_FRD = 12
@@ -149,6 +155,14 @@ def mavlink_timeline(result: SimResult, *, sysid: int = 1, compid: int = 1,
         servo.setdefault(field, np.int64(PWM_CENTER_US))
     servo["time_usec"] = _stamp_us(t_in) % 2**32
     emit("SERVO_OUTPUT_RAW", t_in, servo)
+    if result.scenario.pilot is not None:
+        # A closed loop feeds disturbances back into the commands; the exogenous injection is the
+        # reference that removes that bias (method.md §4.6), so it is logged as flown.
+        inj = {f: np.float64(0.0) for f in ("x", "y", "z")}
+        for name, field in INJECTION_FIELD.items():
+            if name in result.injections:
+                inj[field] = result.injections[name].values
+        emit("DEBUG_VECT", t_in, {"name": INJECTION_NAME, "time_usec": _stamp_us(t_in), **inj})
 
     outs = result.outputs
     # Inertial measurement unit.
