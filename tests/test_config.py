@@ -57,6 +57,8 @@ def test_hover_case_loads_with_its_values():
     assert c.verify == ()
     assert c.spectral.band_rad_s == (0.2, 12.0)
     assert c.spectral.outputs == ("p", "r", "ay", "v", "phi")
+    assert c.spectral.references == ("da_ref", "dr_ref")
+    assert c.signals["da_ref"] == SignalSpec("da_ref", "/mavlink/DEBUG_VECT", "x", "time_usec", 1e-6, 1.0, 0.0, "deg")
     assert c.signals["v"] == SignalSpec("v", "/mavlink/ODOMETRY", "vy", "time_usec", 1e-6, 3.280839895013123, 0.0,
                                         "ft/s")
     assert list(c.tables) == ["state_space"]
@@ -65,7 +67,7 @@ def test_hover_case_loads_with_its_values():
 
 def test_channel_map_loads():
     signals, spectral = load_channel_map(CONFIG / "xv15_channels.toml")
-    assert list(signals) == ["da", "dr", "p", "r", "ay", "beta", "v", "phi"]
+    assert list(signals) == ["da", "dr", "da_ref", "dr_ref", "p", "r", "ay", "beta", "v", "phi"]
     assert signals["dr"].field == "servo4_raw" and signals["dr"].offset == -150.0
     assert signals["beta"] == SignalSpec("beta", "/mavlink/AOA_SSA", "SSA", "time_usec", 1e-6, 1.0, 0.0, "deg")
     assert spectral.outputs == ("p", "r", "ay", "phi")
@@ -181,6 +183,9 @@ BAD_CASES = [
      ["identify[1].start_s", "'10'"]),
     ('outputs = ["y"]', 'outputs = ["y", "q"]', ["spectral.outputs[1]", "'q'", "u, y"]),
     ('inputs = ["u"]', 'inputs = ["w"]', ["spectral.inputs[0]", "'w'"]),
+    ('inputs = ["u"]', 'inputs = ["u"]\nreferences = ["u", "y"]', ["spectral.references", "one reference per input"]),
+    ('inputs = ["u"]', 'inputs = ["u"]\nreferences = ["r9"]', ["spectral.references[0]", "'r9'"]),
+    ('inputs = ["u"]', 'inputs = ["u"]\nreferences = ["y"]', ["spectral.references[0]", "exogenous", "'y'"]),
     ('outputs = ["y"]', 'outputs = ["y", "u"]', ["spectral.inputs[0]", "'u'", "outputs"]),
     ('outputs = ["y"]', 'outputs = ["y", "y"]', ["spectral.outputs[1]", "twice"]),
     ('outputs = ["y"]', "outputs = []", ["spectral.outputs", "[]"]),

@@ -48,7 +48,8 @@ CASE_KEYS = ("case", "identify", "verify", "signals", "spectral") + RAW_TABLE_KE
 _CASE_TABLE_KEYS = ("name", "aircraft", "condition")
 _RECORD_KEYS = ("log", "label", "start_s", "end_s")
 _SIGNAL_KEYS = ("topic", "field", "stamp", "stamp_scale", "scale", "offset", "units")
-_SPECTRAL_KEYS = ("inputs", "outputs", "band_rad_s", "sample_rate_hz", "windows_s", "overlap", "n_freq")
+_SPECTRAL_KEYS = ("inputs", "outputs", "band_rad_s", "sample_rate_hz", "windows_s", "overlap", "n_freq",
+                  "references")
 _MAX_OVERLAP = 0.95
 
 
@@ -129,6 +130,10 @@ class SpectralSettings:
         Window overlap fraction in ``[0, 0.95]``.
     n_freq : int
         Number of frequency points over the band.
+    references : tuple of str or None
+        One exogenous reference per input (e.g. the logged sweep injection of a closed-loop test
+        point), in ``inputs`` order; the responses are then formed as (y/r)(u/r)^-1, free of the
+        bias of disturbances fed back into the inputs (method.md §4.6). None: plain MISO.
     """
 
     inputs: tuple[str, ...]
@@ -138,6 +143,7 @@ class SpectralSettings:
     windows_s: tuple[float, ...] | None = None
     overlap: float = 0.8
     n_freq: int = 150
+    references: tuple[str, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -333,8 +339,20 @@ def _parse_spectral(ctx: _Ctx, raw: Any, signals: Mapping[str, SignalSpec]) -> S
     n_freq = t.get("n_freq", 150)
     if isinstance(n_freq, bool) or not isinstance(n_freq, int) or n_freq < 2:
         raise ctx.error("spectral.n_freq", "must be an integer >= 2", n_freq)
+    references = None
+    if "references" in t:
+        references = _string_list(ctx, t["references"], "spectral.references")
+        if len(references) != len(inputs):
+            raise ctx.error("spectral.references", f"needs one reference per input ({len(inputs)}: "
+                            f"{', '.join(inputs)}), in the same order", t["references"])
+        for i, n in enumerate(references):
+            if n not in signals:
+                raise ctx.error(f"spectral.references[{i}]", f"names no signal in [signals] (defined: {', '.join(signals)})", n)
+            if n in inputs or n in outputs:
+                raise ctx.error(f"spectral.references[{i}]", "is also an input or output; a reference is the "
+                                "exogenous injection, a signal of its own", n)
     return SpectralSettings(inputs=inputs, outputs=outputs, band_rad_s=(lo, hi), sample_rate_hz=fs,
-                            windows_s=windows, overlap=overlap, n_freq=n_freq)
+                            windows_s=windows, overlap=overlap, n_freq=n_freq, references=references)
 
 
 def _parse_record(ctx: _Ctx, raw: Any, where: str, base: Path) -> RecordSpec:

@@ -151,20 +151,27 @@ def run_frequency_response_stage(case: Case) -> FrequencyResponseStage:
     sp = case.spectral
     if sp is None:
         raise ConfigError(f"{case.path}: the case has no [spectral] table; the frequency-response stage needs one")
-    names = list(dict.fromkeys([*sp.inputs, *sp.outputs, *(n for pair in KINEMATIC_PAIRS for n in pair
-                                                             if n in case.signals)]))
+    refs = list(sp.references or ())
+    names = list(dict.fromkeys([*sp.inputs, *sp.outputs, *refs, *(n for pair in KINEMATIC_PAIRS for n in pair
+                                                                   if n in case.signals)]))
     raw = load_record(case, case.identify, names, sp.sample_rate_hz)
     record, wild, bias = _repair(raw)
     checks = _kinematic_checks(case, record)
-    used = list(dict.fromkeys([*sp.inputs, *sp.outputs]))
+    used = list(dict.fromkeys([*sp.inputs, *sp.outputs, *refs]))
     rows = [record.names.index(n) for n in used]
     valid = np.all(record.valid[rows], axis=0)
     analysis = analyze(record.values[rows], used, sp.sample_rate_hz, sp.inputs, sp.outputs, sp.band_rad_s,
-                       valid=valid, windows_s=sp.windows_s, overlap=sp.overlap, n_freq=sp.n_freq)
+                       valid=valid, windows_s=sp.windows_s, overlap=sp.overlap, n_freq=sp.n_freq,
+                       references=refs or None)
     best = analysis.best
     adequacy = tuple(pair_adequacy(p) for p in best.pairs())
     gaps = {n: {"samples_excluded": int(np.sum(~record.valid_of(n)))} for n in record.names}
     notes = []
+    if refs:
+        notes.append("responses formed through the exogenous references " + ", ".join(
+            f"{r} -> {i}" for r, i in zip(refs, sp.inputs)) + " as (y/r)(u/r)^-1, free of the bias of disturbances "
+            "fed back into the inputs by a closed loop (method.md §4.6); frequency_responses_ordinary keeps the "
+            "direct (biased) estimates")
     if not np.all(valid):
         notes.append(f"{int(np.sum(~valid))} samples lie in data gaps; every spectral window touching them was excluded")
     if best.ill_conditioned is not None and np.any(best.ill_conditioned):

@@ -3,7 +3,9 @@
 ``analyze`` checks the settings against the record, computes one spectral matrix per window
 length (overlapped Hann windows, chirp-z on a dense grid), then composites them onto a common
 log-spaced grid: ordinary (SISO) responses for every pair and, with more than one input,
-MISO-conditioned responses with partial and multiple coherences.
+MISO-conditioned responses with partial and multiple coherences. With one exogenous reference per
+input (a closed-loop test point's logged sweep injection), it also forms the responses through the
+references, free of the feedback bias (:mod:`livesweep.spectral.reference`).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from livesweep.errors import ConfigError
 from livesweep.spectral.composite import composite_output_miso, composite_pair
 from livesweep.spectral.miso import input_coherence_max
 from livesweep.spectral.composite import interpolate_window
+from livesweep.spectral.reference import reference_responses
 from livesweep.spectral.response import FrequencyResponseSet
 from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW, window_spectra
 from livesweep.spectral.windows import default_windows_s
@@ -36,23 +39,31 @@ class SpectralAnalysis:
         Conditioned responses (more than one input), else None.
     windows : tuple of WindowSpectra
         The per-window spectral matrices the composite was made from.
+    referenced : FrequencyResponseSet or None
+        Responses through the references, ``(y/r)(u/r)^-1``, when references were given.
     """
 
     siso: FrequencyResponseSet
     miso: FrequencyResponseSet | None
     windows: tuple
+    referenced: FrequencyResponseSet | None = None
 
     @property
     def best(self) -> FrequencyResponseSet:
-        """The conditioned set when there is one, else the ordinary set."""
+        """The referenced set when there is one, else the conditioned set, else the ordinary set."""
+        if self.referenced is not None:
+            return self.referenced
         return self.miso if self.miso is not None else self.siso
 
 
 def check_settings(values: np.ndarray, names, sample_rate_hz: float, inputs, outputs, band_rad_s,
-                   windows_s, valid) -> tuple[float, ...]:
+                   windows_s, valid, references=()) -> tuple[float, ...]:
     """Validate band, windows and signals against the record; return the window lengths [s]."""
     names = list(names)
-    for n in list(inputs) + list(outputs):
+    references = list(references or ())
+    if references and len(references) != len(inputs):
+        raise ConfigError(f"one reference per input: {len(references)} references for {len(inputs)} inputs")
+    for n in list(inputs) + list(outputs) + references:
         if n not in names:
             raise ConfigError(f"signal {n!r} is not in the record (signals: {', '.join(names)})")
     if not inputs or not outputs:
@@ -66,7 +77,7 @@ def check_settings(values: np.ndarray, names, sample_rate_hz: float, inputs, out
     record_s = values.shape[1] / sample_rate_hz
     ok = np.ones(values.shape[1], bool) if valid is None else np.asarray(valid, bool)
     for k, n in enumerate(names):
-        if n not in inputs and n not in outputs:
+        if n not in inputs and n not in outputs and n not in references:
             continue
         x = values[k][ok]
         if x.size == 0 or not np.any(np.isfinite(x)):
@@ -92,7 +103,7 @@ def check_settings(values: np.ndarray, names, sample_rate_hz: float, inputs, out
 
 def analyze(values: np.ndarray, names, sample_rate_hz: float, inputs, outputs, band_rad_s, *,
             valid: np.ndarray | None = None, windows_s=None, overlap: float = 0.8, n_freq: int = 150,
-            max_input_coherence: float = 0.5) -> SpectralAnalysis:
+            max_input_coherence: float = 0.5, references=None) -> SpectralAnalysis:
     """Frequency responses of ``outputs`` to ``inputs`` from a uniformly sampled record.
 
     Parameters
@@ -114,6 +125,9 @@ def analyze(values: np.ndarray, names, sample_rate_hz: float, inputs, outputs, b
         Points of the common log-spaced grid.
     max_input_coherence : float
         Input cross-coherence above which a frequency is flagged ill-conditioned.
+    references : sequence of str, optional
+        One exogenous reference per input, in ``inputs`` order (e.g. the logged sweep injection
+        of a closed-loop test point); adds the referenced set, which ``best`` then returns.
 
     Returns
     -------
@@ -121,8 +135,9 @@ def analyze(values: np.ndarray, names, sample_rate_hz: float, inputs, outputs, b
     """
     values = np.atleast_2d(np.asarray(values, float))
     names = tuple(names)
-    windows_s = check_settings(values, names, sample_rate_hz, inputs, outputs, band_rad_s, windows_s, valid)
-    used = [n for n in names if n in inputs or n in outputs]
+    references = list(references or ())
+    windows_s = check_settings(values, names, sample_rate_hz, inputs, outputs, band_rad_s, windows_s, valid, references)
+    used = [n for n in names if n in inputs or n in outputs or n in references]
     rows = [names.index(n) for n in used]
     x = values[rows]
     windows, skipped = [], []
@@ -164,7 +179,17 @@ def analyze(values: np.ndarray, names, sample_rate_hz: float, inputs, outputs, b
             ill |= ill_o
         miso = FrequencyResponseSet(tuple(outputs), tuple(inputs), omega, Hm, pc, em, True, mc, ill,
                                     {**settings, "max_input_coherence": max_input_coherence})
-    return SpectralAnalysis(siso, miso, windows)
+    referenced = None
+    if references:
+        idx_ref = [used.index(n) for n in references]
+        rr = reference_responses(list(windows), omega, idx_ref, idx_in, idx_out, max_input_coherence)
+        referenced = FrequencyResponseSet(
+            tuple(outputs), tuple(inputs), omega, rr.H, rr.coherence, rr.random_error, True, rr.multiple_coherence,
+            rr.ill_conditioned,
+            {**settings, "max_input_coherence": max_input_coherence, "references": list(references),
+             "referenced": "(y/r)(u/r)^-1 through one exogenous reference per input (method.md §4.6); "
+                           "coherence = product of the two legs' partial coherences, random error added in quadrature"})
+    return SpectralAnalysis(siso, miso, windows, referenced)
 
 
 def _input_coherence_composite(windows, omega, idx_in):

@@ -1,0 +1,113 @@
+"""Frequency responses through a common exogenous reference (method.md §4.6).
+
+In a closed loop (a pilot or a SCAS stabilising the vehicle during the sweep) disturbances reach
+the control inputs through the feedback, so the inputs are correlated with the output noise and
+``G_xy / G_xx`` is biased towards the inverse of the feedback path wherever the disturbance
+dominates (low frequency in turbulence). The sweep injection ``r`` is uncorrelated with the
+disturbance; with one reference per input,
+
+    y = T_yr r,   u = T_ur r   =>   T_yu = T_yr T_ur^-1
+
+is unbiased. ``T_yr`` (outputs over references) and ``T_ur`` (inputs over references) are each a
+composite MISO estimate (:func:`livesweep.spectral.composite.composite_output_miso`), then the
+matrix ratio is taken per frequency.
+
+Coherence and random error of a derived pair ``y_a / u_b``: reference ``b`` is injected on input
+``b``, so the pair is as good as the weaker of its two legs. We report
+``gamma^2 = gamma^2(y_a : r_b | other refs) * gamma^2(u_b : r_b | other refs)`` (product of the
+partial coherences; the SISO form of the common-reference coherence product) and
+``eps^2 = eps(y_a : r_b)^2 + eps(u_b : r_b)^2`` (method.md §4.6 propagation). Both are design
+choices; CIFER's own assignment for derived responses is not documented (method.md §4.6).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from livesweep.spectral.composite import composite_output_miso
+
+__all__ = ["ReferencedResponses", "reference_responses"]
+
+
+@dataclass(frozen=True)
+class ReferencedResponses:
+    """Responses of outputs to inputs formed through references.
+
+    Attributes
+    ----------
+    H : ndarray, complex, shape (n_out, n_in, n_freq)
+        ``T_yr T_ur^-1`` [output units / input units].
+    coherence : ndarray, shape (n_out, n_in, n_freq)
+        Product of the two legs' partial coherences (see module docstring).
+    random_error : ndarray, shape (n_out, n_in, n_freq)
+        Normalised random error, the two legs added in quadrature.
+    multiple_coherence : ndarray, shape (n_out, n_freq)
+        Multiple coherence of each output on all references.
+    ill_conditioned : ndarray of bool, shape (n_freq,)
+        References cross-correlated above the limit, or ``T_ur`` singular.
+    input_over_reference : ndarray, complex, shape (n_in, n_ref, n_freq)
+        ``T_ur`` (for a sensitivity / broken-loop reading: ``u_b / r_b`` is the loop's S).
+    """
+
+    H: np.ndarray
+    coherence: np.ndarray
+    random_error: np.ndarray
+    multiple_coherence: np.ndarray
+    ill_conditioned: np.ndarray
+    input_over_reference: np.ndarray
+
+
+def reference_responses(windows, omega: np.ndarray, references: list[int], inputs: list[int], outputs: list[int],
+                        max_input_coherence: float = 0.5) -> ReferencedResponses:
+    """Outputs over inputs through one reference per input.
+
+    Parameters
+    ----------
+    windows : list of WindowSpectra
+        Per-window spectral matrices holding every referenced signal.
+    omega : ndarray
+        Common grid [rad/s].
+    references, inputs, outputs : list of int
+        Signal indices into the windows' spectral matrices; ``references[b]`` is injected on
+        ``inputs[b]``.
+    max_input_coherence : float
+        Reference cross-coherence above which a frequency is flagged ill-conditioned.
+
+    Returns
+    -------
+    ReferencedResponses
+    """
+    q = len(references)
+    if len(inputs) != q:
+        raise ValueError(f"one reference per input: {q} references for {len(inputs)} inputs")
+    n = omega.size
+    Tur = np.empty((len(inputs), q, n), complex)
+    pc_u, eps_u = np.empty((len(inputs), q, n)), np.empty((len(inputs), q, n))
+    ill = np.zeros(n, bool)
+    for b, i in enumerate(inputs):
+        Tur[b], pc_u[b], _, eps_u[b], ill_b = composite_output_miso(windows, omega, references, i, max_input_coherence)
+        ill |= ill_b
+    Tyr = np.empty((len(outputs), q, n), complex)
+    pc_y, eps_y = np.empty((len(outputs), q, n)), np.empty((len(outputs), q, n))
+    mc = np.empty((len(outputs), n))
+    for a, o in enumerate(outputs):
+        Tyr[a], pc_y[a], mc[a], eps_y[a], ill_a = composite_output_miso(windows, omega, references, o, max_input_coherence)
+        ill |= ill_a
+    A = np.moveaxis(Tur, -1, 0)                       # (n, n_in, q)
+    B = np.moveaxis(Tyr, -1, 0)                       # (n, n_out, q)
+    finite = np.all(np.isfinite(A), axis=(1, 2)) & np.all(np.isfinite(B), axis=(1, 2))
+    with np.errstate(all="ignore"):
+        cond = np.where(finite, np.linalg.cond(np.where(finite[:, None, None], A, np.eye(q))), np.inf)
+    ok = finite & (cond < 1e8)
+    H = np.full((len(outputs), len(inputs), n), np.nan + 0j)
+    if np.any(ok):
+        # T_yu A = B  <=>  A^T T_yu^T = B^T, solved per frequency.
+        X = np.linalg.solve(np.swapaxes(A[ok], 1, 2), np.swapaxes(B[ok], 1, 2))   # (m, q=n_in, n_out)
+        H[:, :, ok] = np.moveaxis(np.swapaxes(X, 1, 2), 0, -1)
+    diag_pc_u = np.array([pc_u[b, b] for b in range(q)])        # (n_in, n)
+    diag_eps_u = np.array([eps_u[b, b] for b in range(q)])
+    coh = np.where(ok, pc_y * diag_pc_u[None, :, :], 0.0)
+    eps = np.where(ok, np.sqrt(eps_y**2 + diag_eps_u[None, :, :] ** 2), np.inf)
+    return ReferencedResponses(H, coh, eps, np.where(ok, mc, 0.0), ill | ~ok, Tur)
