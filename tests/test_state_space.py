@@ -46,10 +46,13 @@ def cruise():
 
 
 @pytest.fixture(scope="module")
-def hover():
-    case = load_case(HOVER)
-    st = run_frequency_response_stage(case)
-    return case, st.analysis.best
+def hover_stage():
+    return run_frequency_response_stage(load_case(HOVER))
+
+
+@pytest.fixture(scope="module")
+def hover(hover_stage):
+    return hover_stage.case, hover_stage.analysis.best
 
 
 def _table(path):
@@ -322,30 +325,63 @@ def test_equation_error_start_when_the_case_gives_no_values(cruise, cruise_fit):
 
 # --- hover ---------------------------------------------------------------------------------------
 
-def test_hover_sample_logs_closed_loop(hover):
-    """Shipped hover logs: flown with a stabilising pilot in turbulence, so the low-frequency
-    responses are closed-loop biased. The control derivatives are recovered; the stability
-    derivatives are not (the truth model itself misfits the data below ~0.8 rad/s)."""
+@pytest.fixture(scope="module")
+def hover_fit(hover):
     case, frs = hover
     model = StateSpaceModel.from_table(case.tables["state_space"], str(case.path))
     pairs, skipped = select_pairs(frs, model)
-    assert {(o, i) for o, i, _ in skipped} == {("p", "dr"), ("ay", "dr"), ("v", "dr"), ("phi", "dr")}
     prior = a_priori_eliminations(model, skipped)
-    assert set(prior) == {"Ydr", "Ldr"}                       # both truly zero in the hover truth
     model = model.with_values(fixed={name: 0.0 for name in prior})
-    fit = fit_state_space(model, pairs, skipped_pairs=skipped)
+    return model, pairs, skipped, prior, fit_state_space(model, pairs, skipped_pairs=skipped)
+
+
+def test_hover_sample_logs_recover_tables_2_3_and_2_4(hover, hover_fit):
+    """Shipped hover logs: flown with a stabilising pilot loop, so the case forms the responses
+    through the logged sweep injections (method.md §4.6). The rudder pairs other than r/dr (and
+    ay/dr) carry no usable coherence, so Ldr and Ydr (truly zero) are fixed a priori; every other
+    parameter of Tables 2.3-2.4 comes out within 3 CR bounds."""
+    case, frs = hover
+    assert frs.settings["references"] == ["da_ref", "dr_ref"]
+    model, pairs, skipped, prior, fit = hover_fit
     print("\n" + _report(fit, HOVER_TRUTH))
+    assert {("p", "dr"), ("v", "dr"), ("phi", "dr")} <= {(o, i) for o, i, _ in skipped}
+    assert set(prior) == {"Ydr", "Ldr"}                       # both truly zero in the hover truth
     assert fit.converged and fit.cost_average <= 50
-    for name in ("Lda", "Nda", "Ndr"):
-        q = fit.parameter(name)
-        assert abs(q.value - HOVER_TRUTH[name]) <= 3 * q.cramer_rao and q.cramer_rao_pct < 20, name
-    # the data, not the fitter: the truth model misfits the coherent low-frequency data
+    _within_cr(fit, HOVER_TRUTH, 3.0)
+    for name in ("Lp", "Lda", "Nr", "Ndr", "Lv", "Nv"):
+        assert fit.parameter(name).cramer_rao_pct < 20, name
+    # the identified modes are the truth's (unstable lateral oscillation, roll, yaw)
+    np.testing.assert_allclose(np.sort_complex(fit.eigenvalues), np.sort_complex(xv15_hover().eigenvalues()), atol=0.08)
+
+
+def test_hover_structure_reduction_removes_the_true_zeros_and_keeps_the_real_ones(hover_fit):
+    model, pairs, _, prior, fit = hover_fit
+    red = reduce_structure(model, pairs, fit)
+    print("\n" + "\n".join(str(s) for s in red.removed))
+    print(_report(red, HOVER_TRUTH))
+    assert set(red.removed_parameters) == {"Yr", "Lr"}      # the table's remaining zeros
+    for name in ("Yv", "Yp", "Lv", "Lp", "Nv", "Np", "Nr", "Yda", "Lda", "Nda", "Ndr"):
+        assert not red.parameter(name).fixed, name
+    assert red.converged and red.cost_average <= 50
+    _within_cr(red, HOVER_TRUTH, 3.0)
+
+
+def test_hover_direct_miso_estimate_is_closed_loop_biased(hover, hover_stage):
+    """Why the case uses references: on the same logs, the direct MISO responses make the true
+    model misfit the low-frequency data, while the referenced responses fit it everywhere."""
+    case, frs = hover
+    st = hover_stage
+    model = StateSpaceModel.from_table(case.tables["state_space"], str(case.path))
     th = model.theta({k: v for k, v in HOVER_TRUTH.items() if k in model.parameters})
-    j_all = np.mean([c for *_, c in _Problem(model, pairs).pair_costs(th)])
-    high, _ = select_pairs(frs, model, omega_range=(0.8, 100.0))
-    j_high = np.mean([c for *_, c in _Problem(model, high).pair_costs(th)])
-    print(f"  truth model J_ave: coherence bands {j_all:.1f}; bands above 0.8 rad/s {j_high:.1f}")
-    assert j_all > 50 and j_high < 10
+
+    def truth_cost_below(frs_, hi):
+        pairs, _ = select_pairs(frs_, model, omega_range=(0.0, hi))
+        return np.mean([c for *_, c in _Problem(model, pairs).pair_costs(th)])
+
+    j_direct, j_ref = truth_cost_below(st.analysis.miso, 1.0), truth_cost_below(st.analysis.referenced, 1.0)
+    print(f"\n  truth model J_ave below 1 rad/s: direct MISO {j_direct:.1f}, referenced {j_ref:.1f}")
+    # measured 10.7 vs 46.9 (the guideline is J_ave <= 50: the direct estimate sits at its edge)
+    assert j_ref < 20 and j_direct > 3 * j_ref
 
 
 def _simulated_frs(model_name, amplitudes, band, windows, seed, turbulence=True):
