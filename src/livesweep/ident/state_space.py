@@ -44,7 +44,8 @@ __all__ = ["StateSpaceModel", "FittedParameter", "StateSpaceFit", "select_pairs"
 MAX_DELTA_COST = 2.0
 
 _MATRICES = ("M", "F", "G", "H", "J")
-_TABLE_KEYS = {"states", "inputs", "outputs", "M", "F", "G", "H", "J", "constants", "parameters", "delays", "bands"}
+_TABLE_KEYS = {"states", "inputs", "outputs", "M", "F", "G", "H", "J", "constants", "parameters", "delays", "output_delays",
+               "bands"}
 _DB = 20.0 / math.log(10.0)
 _DEG = 180.0 / math.pi
 
@@ -81,6 +82,31 @@ def _shape_of(raw, name, rows, cols, row_what, col_what, where):
             raise ConfigError(f"{where}{name}[{i}] has {len(row)} entries, expected {cols} (one per {col_what})")
 
 
+def _parse_delays(table, key, names_of, what, constants, parameters, w):
+    """``delays`` / ``output_delays``: per input/output, a parameter or constant name or seconds."""
+    raw_d = table.get(key, {}) or {}
+    if not isinstance(raw_d, dict):
+        raise ConfigError(f"{w}{key} = {raw_d!r}: must be a table of {what} = delay parameter")
+    for name in raw_d:
+        if name not in names_of:
+            raise ConfigError(f"{w}{key}.{name}: not an {what} ({what}s: {', '.join(names_of)})")
+    delays, dentries = {}, []
+    for name in names_of:
+        val = raw_d.get(name)
+        if val is None:
+            delays[name] = None
+            dentries.append(compile_entry("0", constants, parameters, f"{w}{key}.{name}"))
+            continue
+        if isinstance(val, str) and val.strip() not in parameters and val.strip() not in constants:
+            raise ConfigError(f"{w}{key}.{name} = {val!r}: unknown name (must be a parameter or constant "
+                              "name, or a number of seconds)")
+        if not isinstance(val, str) and (isinstance(val, bool) or not isinstance(val, (int, float)) or val < 0):
+            raise ConfigError(f"{w}{key}.{name} = {val!r}: must be a parameter name or a delay >= 0 s")
+        delays[name] = val.strip() if isinstance(val, str) else None
+        dentries.append(compile_entry(val, constants, parameters, f"{w}{key}.{name}"))
+    return delays, dentries
+
+
 @dataclass(frozen=True)
 class StateSpaceModel:
     """A parameterised state-space model ``M x' = F x + G u(t - tau)``, ``y = H x + J u(t - tau)``.
@@ -103,6 +129,11 @@ class StateSpaceModel:
         Delay parameter (or constant) name per input [s]; None for an undelayed input.
     delay_entries : tuple of CompiledEntry
         One per input (the number 0 when undelayed).
+    output_delays : dict of str -> str or None
+        Delay (sensor time skew) parameter or constant name per output [s]: ``y_o`` is measured
+        ``tau_o`` late, ``exp(-s tau_o)`` on every pair of that output.
+    output_delay_entries : tuple of CompiledEntry
+        One per output (the number 0 when undelayed).
     bands : dict of (str, str) -> (float, float)
         Per-pair fitting bands [rad/s] from the case (``"p/da" = [lo, hi]``); others follow
         coherence.
@@ -131,6 +162,8 @@ class StateSpaceModel:
     bands: dict = field(default_factory=dict)
     where: str = ""
     unset: tuple = ()
+    output_delays: dict = field(default_factory=dict)
+    output_delay_entries: tuple = ()
     _cache: dict = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self):
@@ -226,27 +259,8 @@ class StateSpaceModel:
             mats[key] = tuple(tuple(compile_entry(e, constants, names, f"{w}{key}[{i}][{j}]")
                                     for j, e in enumerate(row)) for i, row in enumerate(raw))
 
-        raw_d = table.get("delays", {}) or {}
-        if not isinstance(raw_d, dict):
-            raise ConfigError(f"{w}delays = {raw_d!r}: must be a table of input = delay parameter")
-        delays, dentries = {}, []
-        for name in raw_d:
-            if name not in inputs:
-                raise ConfigError(f"{w}delays.{name}: not an input (inputs: {', '.join(inputs)})")
-        for j, name in enumerate(inputs):
-            val = raw_d.get(name)
-            if val is None:
-                delays[name] = None
-                dentries.append(compile_entry("0", constants, names, f"{w}delays.{name}"))
-                continue
-            if isinstance(val, str) and val.strip() not in names and val.strip() not in constants:
-                raise ConfigError(f"{w}delays.{name} = {val!r}: unknown name (must be a parameter or constant "
-                                  "name, or a number of seconds)")
-            if not isinstance(val, str) and (isinstance(val, bool) or not isinstance(val, (int, float)) or val < 0):
-                raise ConfigError(f"{w}delays.{name} = {val!r}: must be a parameter name or a delay >= 0 s")
-            e = compile_entry(val, constants, names, f"{w}delays.{name}")
-            delays[name] = val.strip() if isinstance(val, str) else None
-            dentries.append(e)
+        delays, dentries = _parse_delays(table, "delays", inputs, "input", constants, names, w)
+        odelays, odentries = _parse_delays(table, "output_delays", outputs, "output", constants, names, w)
 
         bands = {}
         raw_b = table.get("bands", {}) or {}
@@ -268,14 +282,15 @@ class StateSpaceModel:
             for row in mats[key]:
                 for e in row:
                     used.update(e.parameters)
-        for e in dentries:
+        for e in (*dentries, *odentries):
             used.update(e.parameters)
         for name, fx in zip(names, fixed):
             if not fx and name not in used:
                 raise ConfigError(f"{w}parameters.{name}: free but used in no matrix entry or delay")
 
         model = cls(states, inputs, outputs, mats["M"], mats["F"], mats["G"], mats["H"], mats["J"], constants,
-                    tuple(names), _frozen(init), tuple(fixed), delays, tuple(dentries), bands, where, tuple(unset))
+                    tuple(names), _frozen(init), tuple(fixed), delays, tuple(dentries), bands, where, tuple(unset),
+                    odelays, tuple(odentries))
         model._check_at(model.initial, "the initial values")
         return model
 
@@ -287,7 +302,7 @@ class StateSpaceModel:
                     v = e.value(theta)
                     if not math.isfinite(v):
                         raise ConfigError(f"{e.where} = {e.text!r}: not finite at {what} ({v})")
-        for e in self.delay_entries:
+        for e in (*self.delay_entries, *self.output_delay_entries):
             v = e.value(theta)
             if not math.isfinite(v) or v < 0:
                 raise ConfigError(f"{e.where} = {e.text!r}: delay must be finite and >= 0 s at {what}, got {v}")
@@ -325,6 +340,17 @@ class StateSpaceModel:
             else:
                 nonlin.append(("tau", 0, j, e))
         base["tau"], coef["tau"] = tb[None, :], tc[:, None, :]
+        p = len(self.outputs)
+        entries = self.output_delay_entries or ()
+        ob, oc = np.zeros(p), np.zeros((P, p))
+        for j, e in enumerate(entries):
+            if e.affine is not None:
+                ob[j] = e.affine[0]
+                for k, v in e.affine[1]:
+                    oc[k, j] += v
+            else:
+                nonlin.append(("tau_y", 0, j, e))
+        base["tau_y"], coef["tau_y"] = ob[None, :], oc[:, None, :]
         return {"base": base, "coef": coef, "nonlin": nonlin}
 
     # --- parameters -----------------------------------------------------------------------
@@ -373,7 +399,7 @@ class StateSpaceModel:
     def delay_parameter_indices(self) -> tuple:
         """Indices of parameters that are (alone) an input's delay: bounded to >= 0 in fits."""
         out = []
-        for e in self.delay_entries:
+        for e in (*self.delay_entries, *self.output_delay_entries):
             if e.affine is not None and e.affine[0] == 0.0 and len(e.affine[1]) == 1 and e.affine[1][0][1] > 0:
                 out.append(e.affine[1][0][0])
         return tuple(sorted(set(out)))
@@ -398,14 +424,25 @@ class StateSpaceModel:
         c = self._cache
         out = {k: c["base"][k] + np.tensordot(th, c["coef"][k], axes=1) for k in (*_MATRICES, "tau")}
         for key, i, j, e in c["nonlin"]:
-            out[key][i, j] = e.value(th)
+            if key != "tau_y":
+                out[key][i, j] = e.value(th)
         return out["M"], out["F"], out["G"], out["H"], out["J"], out["tau"][0]
+
+    def output_delays_s(self, theta) -> np.ndarray:
+        """Output (sensor skew) delays [s] at ``theta``, shape (n_outputs,)."""
+        th = np.asarray(theta, float)
+        c = self._cache
+        out = c["base"]["tau_y"] + np.tensordot(th, c["coef"]["tau_y"], axes=1)
+        for key, i, j, e in c["nonlin"]:
+            if key == "tau_y":
+                out[i, j] = e.value(th)
+        return out[0]
 
     def _derivatives(self, theta):
         """d(matrix)/d(theta_k) for every parameter k: dict of arrays (P, rows, cols)."""
         th = np.asarray(theta, float)
         c = self._cache
-        d = {k: c["coef"][k] for k in (*_MATRICES, "tau")}
+        d = {k: c["coef"][k] for k in (*_MATRICES, "tau", "tau_y")}
         if c["nonlin"]:
             d = {k: v.copy() for k, v in d.items()}
             for key, i, j, e in c["nonlin"]:
@@ -425,19 +462,22 @@ class StateSpaceModel:
         Returns
         -------
         ndarray, complex, shape (n_outputs, n_inputs, n_freq)
-            ``[H (jw M - F)^-1 G + J] diag(exp(-jw tau))`` in output units per input unit
+            ``diag(exp(-jw tau_y)) [H (jw M - F)^-1 G + J] diag(exp(-jw tau))`` in output units per input unit
             (computed with linear solves, no inverse).
         """
         return self._response(theta, np.atleast_1d(np.asarray(omega, float)), jacobian=False)[0]
 
     def _response(self, theta, omega, jacobian: bool):
         M, F, G, H, J, tau = self.matrices(theta)
+        tau_y = self.output_delays_s(theta)
         s = 1j * omega                                        # (f,)
         A = s[:, None, None] * M[None] - F[None]              # (f, n, n)
         X = np.linalg.solve(A, np.broadcast_to(G, (omega.size,) + G.shape))   # (f, n, m)
         T0 = H[None] @ X + J[None]                            # (f, p, m)
         E = np.exp(-s[:, None] * tau[None, :])                # (f, m)
-        T = T0 * E[:, None, :]
+        Ey = np.exp(-s[:, None] * tau_y[None, :])             # (f, p)
+        E2 = E[:, None, :] * Ey[:, :, None]                   # (f, p, m)
+        T = T0 * E2
         if not jacobian:
             return np.moveaxis(T, 0, -1), None
         d = self._derivatives(theta)
@@ -449,7 +489,8 @@ class StateSpaceModel:
         dT0 = (np.einsum("kpn,fnm->kfpm", d["H"], X) + np.einsum("fpn,kfnm->kfpm", Yl, inner)
                + d["J"][:, None])
         dtau = d["tau"][:, 0, :]                                           # (k, m)
-        dT = dT0 * E[None, :, None, :] + T[None] * (-s[None, :, None, None] * dtau[:, None, None, :])
+        dtau_y = d["tau_y"][:, 0, :]                                       # (k, p)
+        dT = dT0 * E2[None] + T[None] * (-s[None, :, None, None] * (dtau[:, None, None, :] + dtau_y[:, None, :, None]))
         return np.moveaxis(T, 0, -1), np.moveaxis(dT, 1, -1)               # (p,m,f), (k,p,m,f)
 
     def eigenvalues(self, theta) -> np.ndarray:

@@ -328,7 +328,8 @@ def _delays(tau_s, m: int) -> np.ndarray:
 
 
 def verify(M, F, G, H, J, tau, t_s, u, y, *, output_names, output_units=None, weights=None, valid=None,
-           x0: str = "zero", j_rms_max: float = J_RMS_MAX, tic_max: float = TIC_MAX) -> Verification:
+           x0: str = "zero", j_rms_max: float = J_RMS_MAX, tic_max: float = TIC_MAX,
+           output_delays=None) -> Verification:
     """Verify a state-space model in the time domain (method.md §9; see the module docstring).
 
     Parameters
@@ -341,6 +342,9 @@ def verify(M, F, G, H, J, tau, t_s, u, y, *, output_names, output_units=None, we
         ``y = H x + J u(t - tau)``, in the units of ``y``.
     tau : array_like, shape (m,)
         Delay of each input [s], >= 0.
+    output_delays : array_like, shape (p,), optional
+        Time skew of each output [s], >= 0: the model's output ``o`` is compared ``tau_o`` late
+        (the sensor's sample is older than its stamp). Default none.
     t_s : array_like, shape (N,)
         Uniformly spaced sample times [s].
     u : array_like, shape (m, N)
@@ -434,6 +438,13 @@ def verify(M, F, G, H, J, tau, t_s, u, y, *, output_names, output_units=None, we
     _recurse(Phi, X, drive)
     Y = np.einsum("pn,nkt->pkt", H, X)               # (p, K, N)
     y_u = Y[:, 0, :] + J @ ud
+    if output_delays is not None:
+        tau_y = np.atleast_1d(np.asarray(output_delays, dtype=float)).ravel()
+        if tau_y.size != p or not np.all(np.isfinite(tau_y)) or np.any(tau_y < 0):
+            raise ConfigError(f"verify: output delays must be {p} finite numbers >= 0 s, got {tau_y.tolist()}")
+        for o in np.flatnonzero(tau_y > 0):
+            Y[o] = _delayed(Y[o], np.full(K, tau_y[o]), dt)
+            y_u[o] = _delayed(y_u[o][None, :], tau_y[o:o + 1], dt)[0]
 
     eig = np.linalg.eigvals(A)
     growth = float(np.max(eig.real))
