@@ -77,6 +77,8 @@ INPUT_AND_OUTPUT_EFFECTS = [
      lambda s: 225.0 / (s**2 + 18.0 * s + 225.0)),
     ("structural_mode", dict(output="p", omega_rad_s=OMEGAS[5], zeta=0.05, gain=2.0), ("p", "da"),
      lambda s: 1 + 2.0 * 2 * 0.05 * OMEGAS[5] * s / (s**2 + 2 * 0.05 * OMEGAS[5] * s + OMEGAS[5] ** 2)),
+    ("notch_filter", dict(input="da", omega_rad_s=OMEGAS[5], zeta=0.3, depth=0.8), ("p", "da"),
+     lambda s: (s**2 + 2 * 0.3 * 0.2 * OMEGAS[5] * s + OMEGAS[5] ** 2) / (s**2 + 2 * 0.3 * OMEGAS[5] * s + OMEGAS[5] ** 2)),
     ("sensor_skew", dict(output="p", delay_s=0.05), ("p", "da"), lambda s: np.exp(-0.05 * s)),
     ("sensor_skew", dict(output="ay", delay_s=-0.03), ("ay", "dr"), lambda s: np.exp(0.03 * s)),
     ("scale_factor", dict(output="r", factor=1.15), ("r", "dr"), lambda s: 1.15 + 0 * s),

@@ -42,6 +42,7 @@ __all__ = [
     "TimeDelay",
     "ActuatorLag",
     "ActuatorSecondOrder",
+    "NotchFilter",
     "StructuralMode",
     "SensorSkew",
     "ScaleFactor",
@@ -139,6 +140,39 @@ class ActuatorSecondOrder(Effect):
         w, z = self.omega_rad_s, self.zeta
         A = np.array([[0.0, 1.0], [-(w**2), -2 * z * w]])
         return A, np.array([[0.0], [w**2]]), np.array([[1.0, 0.0]]), np.array([[0.0]])
+
+
+@dataclass(frozen=True)
+class NotchFilter(Effect):
+    """Notch (or, with ``depth`` < 0, resonant) filter in a control path:
+    ``1 - depth 2 zeta w s/(s^2 + 2 zeta w s + w^2)``.
+
+    ``depth`` = 1 is the ideal notch ``(s^2 + w^2)/(s^2 + 2 zeta w s + w^2)`` (zero gain at
+    ``omega_rad_s``); the magnitude at ``omega_rad_s`` is ``1 - depth``.
+    """
+
+    input: str
+    omega_rad_s: float
+    zeta: float
+    depth: float
+    kind: ClassVar[str] = "notch_filter"
+    acts_on: ClassVar[str] = "input"
+
+    def __post_init__(self):
+        _num(self.kind, "omega_rad_s", self.omega_rad_s, positive=True, upper=1e4)
+        _num(self.kind, "zeta", self.zeta, positive=True, upper=5.0)
+        if not (isinstance(self.depth, (int, float)) and -10.0 <= self.depth <= 1.0 and self.depth != 0.0):
+            raise ConfigError(f"{self.kind}: depth must be a number in [-10, 1] other than 0, got {self.depth!r}")
+
+    def frequency_response(self, omega_rad_s):
+        s = 1j * np.asarray(omega_rad_s, dtype=float)
+        w, z = self.omega_rad_s, self.zeta
+        return 1.0 - self.depth * 2 * z * w * s / (s**2 + 2 * z * w * s + w**2)
+
+    def state_space(self):
+        w, z = self.omega_rad_s, self.zeta
+        A = np.array([[0.0, 1.0], [-(w**2), -2 * z * w]])
+        return A, np.array([[0.0], [1.0]]), np.array([[0.0, -self.depth * 2 * z * w]]), np.array([[1.0]])
 
 
 @dataclass(frozen=True)
@@ -258,7 +292,7 @@ class Dropouts(Effect):
 EFFECT_KINDS: dict[str, type[Effect]] = {
     cls.kind: cls
     for cls in (
-        TimeDelay, ActuatorLag, ActuatorSecondOrder, StructuralMode,
+        TimeDelay, ActuatorLag, ActuatorSecondOrder, NotchFilter, StructuralMode,
         SensorSkew, ScaleFactor, SensorBias, Spikes, Dropouts,
     )
 }

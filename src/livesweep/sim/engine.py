@@ -29,6 +29,7 @@ from livesweep.sim.effects import (
     ActuatorLag,
     ActuatorSecondOrder,
     Effect,
+    NotchFilter,
     StructuralMode,
     TimeDelay,
 )
@@ -144,7 +145,7 @@ def augment(model: LinearVehicleModel, effects: list[Effect] = (), turbulence: T
     ----------
     model : LinearVehicleModel
     effects : list of Effect
-        Only ``time_delay``, ``actuator_lag``, ``actuator_second_order`` and ``structural_mode``
+        Only ``time_delay``, ``actuator_lag``, ``actuator_second_order``, ``notch_filter`` and ``structural_mode``
         change the dynamics; the others are sensor effects handled at sampling.
     turbulence : Turbulence or None
 
@@ -163,7 +164,7 @@ def augment(model: LinearVehicleModel, effects: list[Effect] = (), turbulence: T
             model.output_index(eff.output)
         if isinstance(eff, TimeDelay):
             delays[i] += eff.delay_s
-        elif isinstance(eff, (ActuatorLag, ActuatorSecondOrder)):
+        elif isinstance(eff, (ActuatorLag, ActuatorSecondOrder, NotchFilter)):
             in_blocks[eff.input].append(eff.state_space())
         elif isinstance(eff, StructuralMode):
             A, B, C, D = eff.state_space()
