@@ -76,3 +76,18 @@ def tcp_listeners(port: int) -> list[str] | None:
             if p == str(port):
                 found.append(host)
     return found
+
+
+def simulated_record(result, rate_hz: float = 50.0, *, references: bool = False, names=None):
+    """A simulated test point as one (n_signals, N) array at ``rate_hz`` (every signal is
+    decimated from its own rate, which divides the simulator's): inputs, then (optionally) the
+    injections as ``<input>_ref``, then outputs. Returns ``(values, names)``; NaNs kept."""
+    sources = list(result.inputs.items())
+    if references:
+        sources += [(n + "_ref", s) for n, s in result.injections.items()]
+    sources += list(result.outputs.items())
+    if names is not None:
+        sources = [(n, s) for n, s in sources if n in names]
+    rows = [s.values[::int(round(s.rate_hz / rate_hz))] for _, s in sources]
+    n = min(r.size for r in rows)
+    return np.array([r[:n] for r in rows]), [name for name, _ in sources]

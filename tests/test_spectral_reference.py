@@ -15,19 +15,14 @@ from livesweep.sim.models import xv15_hover
 from livesweep.sim.scenario import simulate, sweep_scenario
 from livesweep.spectral.analysis import analyze
 
+from helpers import simulated_record
+
 BAND = (0.2, 12.0)
 WINDOWS = (10.0, 20.0, 40.0, 80.0, 160.0)
 
 
-def _record(result, rate_hz=50.0):
-    names, rows = [], []
-    sources = list(result.inputs.items()) + [(n + "_ref", s) for n, s in result.injections.items()] + list(
-        result.outputs.items())
-    for name, sig in sources:
-        names.append(name)
-        rows.append(sig.values[::int(round(sig.rate_hz / rate_hz))])
-    n = min(r.size for r in rows)
-    values = np.array([r[:n] for r in rows])
+def _record(result):
+    values, names = simulated_record(result, references=True)
     return values - values.mean(axis=1, keepdims=True), names
 
 

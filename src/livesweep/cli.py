@@ -204,10 +204,10 @@ def cmd_demo(args) -> int:
     signals_text = channels.read_text()
     case = out_dir / "demo_case.toml"
     case.write_text(DEMO_CASE.format(signals=signals_text[signals_text.index("[signals.da]"):signals_text.index("[spectral]")]))
-    return cmd_identify(argparse.Namespace(case=str(case), out=str(out_dir / "report"), stage="verification"))
+    return cmd_identify(argparse.Namespace(case=str(case), out=str(out_dir / "report"), stage="residual-loop"))
 
 
-STAGES = ("frequency-response", "transfer-functions", "state-space", "verification")
+STAGES = ("frequency-response", "transfer-functions", "state-space", "verification", "residual-loop")
 
 
 def cmd_identify(args) -> int:
@@ -219,10 +219,13 @@ def cmd_identify(args) -> int:
     from livesweep.pipeline.frequency_response import run_frequency_response_stage
     from livesweep.pipeline.parametric import (run_state_space_stage, run_transfer_function_stage,
                                                run_verification_stage)
+    from livesweep.pipeline.residual import residual_settings, run_residual_stage
     from livesweep.report.writer import prepare_out_dir, write_frequency_report
 
     prepare_out_dir(args.out)
     case = load_case(args.case)
+    if case.tables.get("state_space"):
+        residual_settings(case)                 # a bad [residual] table fails before any work
     last = STAGES.index(args.stage)
     t0 = time.monotonic()
 
@@ -232,7 +235,7 @@ def cmd_identify(args) -> int:
     progress(f"{case.name}: frequency responses from {len(case.identify)} record(s)")
     stage = run_frequency_response_stage(case)
     best = stage.analysis.best
-    tf = ss = ver = None
+    tf = ss = ver = res = None
     if last >= 1 and case.tables.get("transfer_functions"):
         progress(f"transfer functions: {', '.join(case.tables['transfer_functions'])}")
         tf = run_transfer_function_stage(case, best)
@@ -241,8 +244,12 @@ def cmd_identify(args) -> int:
     if last >= 3 and ss is not None and case.verify:
         progress(f"verification on {len(case.verify)} record(s)")
         ver = run_verification_stage(case, ss, case.spectral.sample_rate_hz)
+    if last >= 4 and ss is not None:
+        progress("residual loop: diagnosing what the model lacks")
+        res = run_residual_stage(case, best, ss, progress=progress)
     progress("writing the report")
-    path = write_frequency_report(stage, args.out, transfer_functions=tf, state_space=ss, verification=ver)
+    path = write_frequency_report(stage, args.out, transfer_functions=tf, state_space=ss, verification=ver,
+                                  residual=res)
     dq = stage.data_quality
     print(f"{case.name}: {len(best.outputs)} outputs x {len(best.inputs)} inputs, "
           f"{'MISO-conditioned' if best.conditioned else 'SISO'} composite of windows {best.settings['windows_s']} s "
@@ -274,6 +281,16 @@ def cmd_identify(args) -> int:
     for label, v in (ver.results if ver else ()):
         print(f"  verification {label}: J_rms {v.j_rms:.3f}, TIC "
               + ", ".join(f"{o.name} {o.tic:.3f}" for o in v.outputs) + (": pass" if v.passed else ": FAIL"))
+    if res is not None:
+        loop = res.loop
+        print(f"  residual loop: {loop.conclusion} ({loop.n_fits} re-identifications)")
+        for st in loop.steps:
+            if st.effect is not None:
+                pars = ", ".join(f"{p['name']} = {p['value']:.4g} (CR {p['cramer_rao_pct']}%)" for p in st.effect["parameters"])
+                ver_txt = (f", verification J_rms {st.verification_before['j_rms']:.3f} -> {st.verification_after['j_rms']:.3f}"
+                           if st.verification_before and st.verification_after else "")
+                print(f"    + {st.effect['kind']} at {st.effect['where']}: {pars}; J_ave {st.cost_before:.2f} -> "
+                      f"{st.cost_after:.2f}{ver_txt}")
     for note in dq["notes"]:
         print(f"  note: {note}")
     print(f"wrote {path} and {path.parent / 'report.html'}")
@@ -481,7 +498,7 @@ def build_parser() -> argparse.ArgumentParser:
     i = sub.add_parser("identify", help="identify from a case file (DESIGN.md §4.2) and write report.json, report.html, plots")
     i.add_argument("case", help="case file (TOML)")
     i.add_argument("--out", required=True, help="folder for the report")
-    i.add_argument("--stage", default="verification", choices=list(STAGES),
+    i.add_argument("--stage", default="residual-loop", choices=list(STAGES),
                    help="last stage to run (default: every stage the case defines)")
     i.set_defaults(func=cmd_identify)
 

@@ -483,11 +483,11 @@ class StateSpaceModel:
         d = self._derivatives(theta)
         Yl = np.swapaxes(np.linalg.solve(np.swapaxes(A, 1, 2), np.broadcast_to(H.T, (omega.size,) + H.T.shape)), 1, 2)
         # dA X = (s dM - dF) X ;  dT0 = dH X + Yl (dG - dA X) + dJ
-        dFX = np.einsum("kab,fbm->kfam", d["F"], X)
-        dMX = np.einsum("kab,fbm->kfam", d["M"], X)
+        # batched matrix products (BLAS), not einsum: this is the inner loop of every fit
+        dFX = np.matmul(d["F"][:, None], X[None])                         # (k, f, n, m)
+        dMX = np.matmul(d["M"][:, None], X[None])
         inner = d["G"][:, None] + dFX - s[None, :, None, None] * dMX      # (k, f, n, m)
-        dT0 = (np.einsum("kpn,fnm->kfpm", d["H"], X) + np.einsum("fpn,kfnm->kfpm", Yl, inner)
-               + d["J"][:, None])
+        dT0 = np.matmul(d["H"][:, None], X[None]) + np.matmul(Yl[None], inner) + d["J"][:, None]
         dtau = d["tau"][:, 0, :]                                           # (k, m)
         dtau_y = d["tau_y"][:, 0, :]                                       # (k, p)
         dT = dT0 * E2[None] + T[None] * (-s[None, :, None, None] * (dtau[:, None, None, :] + dtau_y[:, None, :, None]))

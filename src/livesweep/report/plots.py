@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import matplotlib
+import matplotlib.ticker
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -12,7 +13,7 @@ import numpy as np  # noqa: E402
 
 from livesweep.spectral.response import FrequencyResponse  # noqa: E402
 
-__all__ = ["bode_plot", "time_history_plot"]
+__all__ = ["bode_plot", "time_history_plot", "residual_plot"]
 
 ADEQUATE_COHERENCE = 0.6
 
@@ -108,5 +109,45 @@ def time_history_plot(t_s, measured, predicted, inputs, names, units, input_name
     fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def residual_plot(before, after, path, *, title: str = "") -> Path:
+    """Frequency-domain residual (data minus model) before and after one residual-loop step.
+
+    Parameters
+    ----------
+    before, after : sequence of PairResidual
+        Same pairs, same order (:func:`livesweep.ident.residual.pair_residuals`).
+    path : str or Path
+        PNG to write: one column per pair, magnitude [dB] over phase [deg], the data's
+        +/-2-sigma random error shaded.
+    """
+    n = len(before)
+    fig, axes = plt.subplots(2, n, figsize=(max(2.6 * n, 6.0), 4.6), sharex="col", squeeze=False)
+    for k, (b, a) in enumerate(zip(before, after)):
+        for row, (yb, ya, sig, unit) in enumerate(((b.magnitude_db, a.magnitude_db, b.sigma_db, "dB"),
+                                                  (b.phase_deg, a.phase_deg, b.sigma_deg, "deg"))):
+            ax = axes[row, k]
+            ax.fill_between(b.omega, -2 * sig, 2 * sig, color="0.85", label="2 sigma")
+            ax.semilogx(b.omega, yb, color="tab:red", lw=1.2, label="before")
+            ax.semilogx(a.omega, ya, color="tab:blue", lw=1.2, label="after")
+            ax.axhline(0.0, color="k", lw=0.5)
+            ax.grid(True, which="both", alpha=0.3)
+            ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+            if k == 0:
+                ax.set_ylabel(f"residual [{unit}]")
+            if row == 0:
+                ax.set_title(f"{b.output}/{b.input}", fontsize=9)
+            else:
+                ax.set_xlabel("rad/s")
+    axes[0, 0].legend(fontsize=7, loc="best")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=80)
     plt.close(fig)
     return path

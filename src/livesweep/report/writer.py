@@ -62,7 +62,8 @@ def _atomic_write(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
-def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_space=None, verification=None) -> Path:
+def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_space=None, verification=None,
+                           residual=None) -> Path:
     """Write the report of the stages run; returns the path of ``report.json``.
 
     Parameters
@@ -74,6 +75,9 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
         Needs ``.fit`` (StateSpaceFit) and ``.pairs``.
     verification : VerificationStage, optional
         Needs ``.results``: list of (label, Verification).
+    residual : ResidualStage, optional
+        The residual loop (``.loop``): ``residual_loop`` in the JSON, residual plots per step and,
+        when it added an effect, ``augmented_case.toml`` (the case with the augmented model).
     """
     out = prepare_out_dir(out_dir)
     case, an = stage.case, stage.analysis
@@ -133,6 +137,9 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
         first = records[0] if records else {}
         report["verification"] = {**{k: first.get(k) for k in ("outputs", "j_rms", "passed", "guidelines")},
                                   "records": records}
+    if residual is not None:
+        stages.append("residual-loop")
+        report["residual_loop"] = _residual_section(case, residual.loop, out)
     if best.conditioned:
         report["frequency_responses_ordinary"] = [p.to_dict() for p in an.siso.pairs()]
         report["multiple_coherence"] = {o: best.multiple_coherence[k].tolist() for k, o in enumerate(best.outputs)}
@@ -145,6 +152,28 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
     _atomic_write(path, json.dumps(report, indent=1, allow_nan=False))
     _atomic_write(out / "report.html", _embed_images(_html(report), out))
     return path
+
+
+def _residual_section(case, loop, out: Path) -> dict:
+    from livesweep.report.case_file import write_augmented_case
+    from livesweep.report.plots import residual_plot
+
+    d = loop.to_dict()
+    for k, (step, sd) in enumerate(zip(loop.steps, d["steps"])):
+        rel = f"plots/residual_step_{k + 1}.png"
+        what = (f"added {step.effect['kind']} at {step.effect['where']}" if step.effect else "nothing added")
+        residual_plot(step.residuals_before, step.residuals_after, out / rel,
+                      title=f"{case.name}: residual loop step {k + 1} ({what})")
+        sd["plot"] = rel
+        sd["residuals_before"] = [r.to_dict() for r in step.residuals_before]
+        sd["residuals_after"] = [r.to_dict() for r in step.residuals_after]
+    if loop.added:
+        header = ("Written by livesweep's residual loop from " + str(case.path) + "\n" + "\n".join(
+            f"added {e['kind']} at {e['where']}: " + ", ".join(f"{p['name']} = {p['value']:.6g}" for p in e["parameters"])
+            for e in loop.added))
+        write_augmented_case(case.path, loop.table, out / "augmented_case.toml", header=header)
+        d["augmented_case"] = "augmented_case.toml"
+    return d
 
 
 def _html(report: dict) -> str:
@@ -246,6 +275,32 @@ def _html_parametric(report: dict) -> str:
         parts.append("<h2>Time-domain verification</h2><p>Dissimilar manoeuvres, no parameter changed; biases and "
                      "reference shifts by least squares (method.md §9). Guidelines: J<sub>rms</sub> &le; 2, TIC &le; 0.25."
                      "</p>" + "".join(blocks))
+    rl = report.get("residual_loop")
+    if rl:
+        blocks = [f"<p><b>{e(rl['conclusion'])}</b> ({rl['re_identifications']} re-identifications)"
+                  + (f"; augmented case: <code>{e(rl['augmented_case'])}</code>" if rl.get("augmented_case") else "")
+                  + "</p>"]
+        for k, st in enumerate(rl["steps"]):
+            eff = st["effect"]
+            cands = ", ".join(f"{c['kind']} at {c['where']} ({c['evidence']:.0f})" for c in st["candidates"][:4])
+            vb, va = st.get("verification_before"), st.get("verification_after")
+            ver = (f"; verification J<sub>rms</sub> {vb['j_rms']:.3f} &rarr; {va['j_rms']:.3f}" if vb and va else "")
+            if eff:
+                pars = ", ".join(f"{p['name']} = {p['value']:.4g} (CR {p['cramer_rao_pct']}%)" for p in eff["parameters"])
+                head = f"added <b>{e(eff['kind'])}</b> at <b>{e(eff['where'])}</b>: {e(pars)}"
+            else:
+                head = "nothing added"
+            tried = "".join(f"<li>{e(t['kind'])} at {e(t['where'])}: J<sub>ave</sub> {t['cost_after']:.2f}, {e(t['reason'])}</li>"
+                            for t in st["tried"])
+            blocks.append(f"<h3>Step {k + 1}: {head}</h3><p>J<sub>ave</sub> {st['cost_before']:.2f} &rarr; "
+                          f"{st['cost_after']:.2f}{ver}. Ranked evidence (noise units): {e(cands)}</p>"
+                          f"<ul>{tried}</ul><img src=\"{e(st['plot'])}\" width=\"900\">")
+        if rl["unexplained"]:
+            blocks.append("<p>Unexplained: " + e("; ".join(str(u) for u in rl["unexplained"])) + "</p>")
+        parts.append("<h2>Residual loop</h2><p>The identified model's residual against the data's random error, "
+                     "matched to a catalogue of missing effects; the best-supported one is added and kept only when "
+                     "the cost drops beyond noise, the verification error does not get worse beyond noise, and its "
+                     "parameters meet CR &le; 20 %, I &le; 10 %.</p>" + "".join(blocks))
     return "".join(parts)
 
 
