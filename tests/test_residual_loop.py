@@ -229,3 +229,19 @@ def test_diagnosis_ranks_the_model_own_sensitivity_for_a_fixed_derivative():
     top = diagnose(table_with_fit(table, fit), fit, pairs, frs)[0]
     assert (top.kind, top.where) == ("missing_derivative", "Nr")
     assert math.isclose(top.parameters["value"], TRUTH.derivatives["Nr"], rel_tol=0.25)
+
+
+def test_a_candidate_that_diverges_in_verification_counts_as_worse():
+    """An augmented model that blows up open loop must not pass the time-domain test as
+    'unchanged' (its residual is all invalid, so a noise estimate alone would say nothing)."""
+    from livesweep.ident.residual import _verification_change
+
+    t = np.arange(3000) / 50.0
+    u = np.sin(0.7 * t)[None, :]
+    y = (0.5 * np.sin(0.7 * t - 0.3))[None, :]
+    one = np.eye(1)
+    stable = verify(one, -one, one, one, 0 * one, [0.0], t, u, y, output_names=["y"])
+    diverging = verify(one, 400 * one, one, one, 0 * one, [0.0], t, u, y, output_names=["y"])
+    assert not np.isfinite(diverging.j_rms)
+    assert _verification_change(stable, diverging)["verdict"] == "worse"
+    assert _verification_change(stable, stable)["verdict"] == "unchanged"

@@ -813,8 +813,12 @@ def _verification_change(before, after):
     d = np.concatenate(ds) if ds else np.zeros(0)
     noise = float(np.std(means, ddof=1) / math.sqrt(len(means))) if len(means) >= 3 else float("inf")
     mean = float(d.mean()) if d.size else 0.0
-    verdict = "improved" if mean < -2 * noise else ("worse" if mean > 2 * noise else "unchanged")
     sb, sa = _ver_summary(before), _ver_summary(after)
+    if sa["j_rms"] is None or not np.isfinite(mean):
+        # the new model diverges open loop (or predicts nothing): worse, whatever the noise
+        return {"j_rms_before": sb["j_rms"], "j_rms_after": sa["j_rms"], "mean_change": None, "noise": None,
+                "verdict": "worse" if sb["j_rms"] is not None else "unchanged"}
+    verdict = "improved" if mean < -2 * noise else ("worse" if mean > 2 * noise else "unchanged")
     return {"j_rms_before": sb["j_rms"], "j_rms_after": sa["j_rms"], "mean_change": mean, "noise": noise,
             "verdict": verdict}
 
@@ -848,8 +852,11 @@ def _try(table, cand, fit, pairs, frs, verify, ss_before, ver_before, min_eviden
         if p["insensitivity_pct"] is None or p["insensitivity_pct"] > MAX_INSENSITIVITY_PCT:
             reasons.append(f"{p['name']} I% {p['insensitivity_pct']} > {MAX_INSENSITIVITY_PCT:g}")
     if change is not None and change["verdict"] == "worse":
-        reasons.append(f"verification J_rms {change['j_rms_before']:.4g} -> {change['j_rms_after']:.4g}: worse beyond "
-                       f"noise (mean squared-error change {change['mean_change']:.3g} > 2 x {change['noise']:.3g})")
+        if change["mean_change"] is None:
+            reasons.append(f"verification: the model diverges open loop (J_rms {change['j_rms_before']} -> not finite)")
+        else:
+            reasons.append(f"verification J_rms {change['j_rms_before']:.4g} -> {change['j_rms_after']:.4g}: worse beyond "
+                           f"noise (mean squared-error change {change['mean_change']:.3g} > 2 x {change['noise']:.3g})")
     rec["accepted"] = not reasons
     rec["reason"] = "; ".join(reasons) if reasons else "accepted"
     return rec, (table_with_fit(aug, new_fit), new_fit, ver_after)
