@@ -62,6 +62,8 @@ def test_identify_finds_the_skew_and_writes_a_case_that_closes_the_loop(skewed_c
     assert (tmp_path / "first" / step["plot"]).is_file()
     assert len(step["residuals_before"]) == len(step["residuals_after"]) == 8
     assert "Residual loop" in (tmp_path / "first" / "report.html").read_text()
+    (final,) = rl["verification_final"]
+    assert final["j_rms"] <= 1.05 * step["verification_before"]["j_rms"] and (tmp_path / "first" / final["plot"]).is_file()
     # the augmented case: readable, runnable, with the skew as a parameter of its model
     aug = tmp_path / "first" / rl["augmented_case"]
     case = load_case(aug)

@@ -30,10 +30,12 @@ _KEYS = {"enabled", "max_steps", "kinds", "min_evidence"}
 
 @dataclass(frozen=True)
 class ResidualStage:
-    """The loop's result and the settings it ran with."""
+    """The loop's result, the settings it ran with and, when it added effects, the final model's
+    verification per record (label, Verification) for the time-domain plots."""
 
     loop: ResidualLoop
     settings: dict
+    verification_after: tuple = ()
 
 
 def residual_settings(case: Case) -> dict:
@@ -104,4 +106,8 @@ def run_residual_stage(case: Case, frs: FrequencyResponseSet, ss, *, progress=No
     verify = _verifier(case, case.spectral.sample_rate_hz, tuple(model.inputs), tuple(model.outputs))
     loop = run_residual_loop(case.tables["state_space"], ss.fit, frs, verify=verify, max_steps=settings["max_steps"],
                              kinds=settings["kinds"], min_evidence=settings["min_evidence"], progress=progress)
-    return ResidualStage(loop, settings)
+    after = ()
+    if verify is not None and loop.added:
+        labels = [rec.label or rec.log.name for rec in case.verify]
+        after = tuple(zip(labels, verify(loop.fit.model, loop.fit.theta)))
+    return ResidualStage(loop, settings, after)

@@ -8,6 +8,8 @@ import os
 import tempfile
 from pathlib import Path
 
+import numpy as np
+
 from livesweep import __version__
 from livesweep.errors import ConfigError
 from livesweep.report.plots import bode_plot
@@ -140,6 +142,18 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
     if residual is not None:
         stages.append("residual-loop")
         report["residual_loop"] = _residual_section(case, residual.loop, out)
+        from livesweep.report.plots import time_history_plot
+
+        after = []
+        for k, (label, v) in enumerate(residual.verification_after):
+            rel = f"plots/residual_verification_{k}.png"
+            time_history_plot(v.t_s, v.measured, v.predicted, v.inputs, [o.name for o in v.outputs],
+                              [o.units for o in v.outputs], list(residual.loop.fit.model.inputs), out / rel,
+                              title=f"{case.name}: verification after the residual loop, {label}",
+                              tic=[o.tic for o in v.outputs])
+            after.append({"label": label, "j_rms": _num_or_none(v.j_rms), "plot": rel,
+                          "tic": {o.name: _num_or_none(o.tic) for o in v.outputs}})
+        report["residual_loop"]["verification_final"] = after
     if best.conditioned:
         report["frequency_responses_ordinary"] = [p.to_dict() for p in an.siso.pairs()]
         report["multiple_coherence"] = {o: best.multiple_coherence[k].tolist() for k, o in enumerate(best.outputs)}
@@ -152,6 +166,11 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
     _atomic_write(path, json.dumps(report, indent=1, allow_nan=False))
     _atomic_write(out / "report.html", _embed_images(_html(report), out))
     return path
+
+
+def _num_or_none(x):
+    x = float(x)
+    return x if np.isfinite(x) else None
 
 
 def _residual_section(case, loop, out: Path) -> dict:
@@ -295,6 +314,9 @@ def _html_parametric(report: dict) -> str:
             blocks.append(f"<h3>Step {k + 1}: {head}</h3><p>J<sub>ave</sub> {st['cost_before']:.2f} &rarr; "
                           f"{st['cost_after']:.2f}{ver}. Ranked evidence (noise units): {e(cands)}</p>"
                           f"<ul>{tried}</ul><img src=\"{e(st['plot'])}\" width=\"900\">")
+        for r in rl.get("verification_final", []):
+            blocks.append(f"<p>Time domain after the loop, {e(r['label'])}: J<sub>rms</sub> {r['j_rms']:.3f} "
+                          f"(before: see the verification section)</p><img src=\"{e(r['plot'])}\" width=\"700\">")
         if rl["unexplained"]:
             blocks.append("<p>Unexplained: " + e("; ".join(str(u) for u in rl["unexplained"])) + "</p>")
         parts.append("<h2>Residual loop</h2><p>The identified model's residual against the data's random error, "
