@@ -220,3 +220,23 @@ def test_the_full_response_set_is_saved_for_later_stages(cruise_report):
     np.testing.assert_allclose(frs.pair("p", "da").phase_deg, p_da["phase_deg"], rtol=1e-12)
     ordinary = load_response_set(out / ("ordinary_" + rep["frequency_response_set"]))
     assert not ordinary.conditioned
+
+
+def test_doublets_are_called_pulse_like_and_sweeps_are_not():
+    """The data-quality section says why doublets give poor spectra: their input power falls far
+    faster across the band than a sweep's (theory for a constant-amplitude exponential sweep:
+    10 dB/decade)."""
+    import dataclasses
+
+    from livesweep.config import load_case
+    from livesweep.pipeline.frequency_response import run_frequency_response_stage
+
+    case = load_case(Path(__file__).resolve().parents[1] / "config" / "xv15_cruise_lateral.toml")
+    sweeps = run_frequency_response_stage(case).data_quality
+    assert all(-12.0 < s < -6.0 for s in sweeps["input_power_slope_db_per_decade"].values())
+    assert not any("pulse-like" in n for n in sweeps["notes"])
+    doublets = run_frequency_response_stage(dataclasses.replace(
+        case, identify=case.verify,
+        spectral=dataclasses.replace(case.spectral, windows_s=(5.0, 10.0, 20.0), band_rad_s=(1.0, 20.0)))).data_quality
+    assert all(s < -16.0 for s in doublets["input_power_slope_db_per_decade"].values())
+    assert sum("pulse-like" in n for n in doublets["notes"]) == 2

@@ -22,7 +22,8 @@ from livesweep.consistency.kinematics import check_angle_against_rate, euler_ang
 from livesweep.consistency.resample import UniformRecord, concatenate, resample_uniform
 from livesweep.consistency.wildpoints import replace_wild_points
 from livesweep.errors import ConfigError
-from livesweep.spectral.adequacy import pair_adequacy
+from livesweep.spectral.adequacy import (PULSE_LIKE_SLOPE_DB_PER_DECADE, input_power_slope_db_per_decade,
+                                         pair_adequacy)
 from livesweep.spectral.analysis import SpectralAnalysis, analyze
 from livesweep.telemetry.signals import read_signals
 
@@ -174,6 +175,14 @@ def run_frequency_response_stage(case: Case) -> FrequencyResponseStage:
             "direct (biased) estimates")
     if not np.all(valid):
         notes.append(f"{int(np.sum(~valid))} samples lie in data gaps; every spectral window touching them was excluded")
+    slopes = {i: input_power_slope_db_per_decade(analysis.windows, i, sp.band_rad_s) for i in sp.inputs}
+    for i, slope in slopes.items():
+        poor = [a for a in adequacy if a.input == i and a.fraction < 0.5]
+        if np.isfinite(slope) and slope < PULSE_LIKE_SLOPE_DB_PER_DECADE and poor:
+            notes.append(f"input {i}: its power falls {-slope:.0f} dB per decade across the band (a frequency sweep "
+                         f"falls about 10): pulse-like inputs such as doublets excite only the bottom of the band, so "
+                         f"{len(poor)} of its pairs are adequate over less than half of it; fly frequency sweeps for "
+                         "frequency responses and keep the doublets for time-domain verification")
     if best.ill_conditioned is not None and np.any(best.ill_conditioned):
         frac = float(np.mean(best.ill_conditioned))
         notes.append(f"input cross-coherence above 0.5 at {100 * frac:.0f} % of frequencies: conditioned responses "
@@ -194,6 +203,7 @@ def run_frequency_response_stage(case: Case) -> FrequencyResponseStage:
         "gaps": gaps,
         "kinematic_checks": checks,
         "excitation": [a.to_dict() for a in adequacy],
+        "input_power_slope_db_per_decade": {i: (round(v, 2) if np.isfinite(v) else None) for i, v in slopes.items()},
         "notes": notes,
     }
     return FrequencyResponseStage(case, record, analysis, adequacy, data_quality)

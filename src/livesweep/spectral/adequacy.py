@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from livesweep.spectral.response import FrequencyResponse
 
-__all__ = ["PairAdequacy", "pair_adequacy", "MIN_COHERENCE", "MAX_RANDOM_ERROR"]
+__all__ = ["PairAdequacy", "pair_adequacy", "input_power_slope_db_per_decade", "PULSE_LIKE_SLOPE_DB_PER_DECADE", "MIN_COHERENCE", "MAX_RANDOM_ERROR"]
 
 MIN_COHERENCE = 0.6
 MAX_RANDOM_ERROR = 0.2
+#: Input power falling faster than this across the band [dB/decade] looks pulse-like (doublets),
+#: not swept (measured: the shipped XV-15 sweeps -9, their verification doublets -19 and -26 over
+#: 1-20 rad/s; a constant-amplitude exponential sweep falls 10 in theory).
+PULSE_LIKE_SLOPE_DB_PER_DECADE = -14.0
 
 
 @dataclass(frozen=True)
@@ -56,3 +61,37 @@ def pair_adequacy(resp: FrequencyResponse, min_coherence: float = MIN_COHERENCE,
     widest = max(bands, key=lambda b: np.log10(b[1] / b[0]), default=None)
     return PairAdequacy(resp.output, resp.input, bands, widest, float(np.mean(ok)) if ok.size else 0.0,
                         float(np.median(resp.coherence)) if resp.coherence.size else 0.0)
+
+
+def input_power_slope_db_per_decade(windows, name: str, band_rad_s) -> float:
+    """How fast an input's power density falls across the band [dB/decade] (negative: it falls).
+
+    Median autospectrum over the top third of the band (log frequency; from the shortest window,
+    which has the most averages there) minus the median over the bottom third (from the longest
+    window, the only one that resolves it). A constant-amplitude exponential sweep dwells
+    ``1/w`` as long at each frequency, so it falls about 10 dB per decade (the shipped XV-15
+    sweeps: -9); doublets fall faster above their pulse frequency, with nulls (the XV-15
+    verification doublets: -19 and -26 over 1-20 rad/s).
+
+    Parameters
+    ----------
+    windows : sequence of WindowSpectra
+    name : str
+        The input's signal name.
+    band_rad_s : (float, float)
+    """
+    lo, hi = float(band_rad_s[0]), float(band_rad_s[1])
+    third = (hi / lo) ** (1.0 / 3.0)
+    by_len = sorted(windows, key=lambda w: w.window_s)
+
+    def median_power(ws, a, b):
+        k = ws.names.index(name)
+        sel = (ws.omega >= a) & (ws.omega <= b)
+        return float(np.median(ws.G[k, k, sel].real)) if np.any(sel) else float("nan")
+
+    top = median_power(by_len[0], hi / third, hi)
+    bottom = median_power(by_len[-1], lo, lo * third)
+    if not (top > 0 and bottom > 0):
+        return float("nan")
+    decades = math.log10(hi / lo) * 2.0 / 3.0          # between the thirds' centres
+    return 10.0 * float(np.log10(top / bottom)) / decades
