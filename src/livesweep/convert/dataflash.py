@@ -1,0 +1,649 @@
+"""ArduPilot DataFlash (``.bin``) and PX4 sdlog2 (``.px4log``) logs to livesweep MCAP.
+
+Both are the same binary format: ``A3 95 <type>`` then the fields of that type, packed as its
+``FMT`` record says. The file is indexed with pymavlink's
+:class:`pymavlink.DFReader.DFReader_binary` (used directly; never through
+``mavutil.mavlink_connection``, which picks a reader by file name and executes paths that
+contain ``/bin/``), without its clock search, which walks the whole file when there is no GPS.
+The records of each type are then decoded column-wise with numpy from the offsets
+DFReader found, and written in file order.
+
+Channels
+    ``/dataflash/<NAME>`` per message type (``FMT``, ``PARM``, ``MSG``, ``ATT``, ``SIDD``,
+    ``SIDS`` ... every type in the log), schema ``dataflash.<NAME>`` (a JSON Schema of its
+    fields), message encoding ``json``. A multi-instance type (``IMU``, ``BARO``, ``GPS`` ...
+    whose FMTU marks an instance field with ``#``) stays **one channel** and keeps its instance
+    field (e.g. ``IMU.I``), as MAVLink topics keep ``sysid``/``compid``; the field is named in
+    the channel metadata ``instance_field``. Pick one instance with a filter on that field.
+
+Values and units
+    Values are in the unit the log declares (FMTU unit ids, looked up in the UNIT table) with
+    the multiplier applied: a field of format ``c``/``C``/``e``/``E`` is divided by 100 and one
+    of format ``L`` by 10**7 (the multiplier the format itself implies, which FMTU repeats);
+    any other numeric field is multiplied by its FMTU multiplier (MULT table) unless that is
+    ``-``/``0``/``?``/1 (for example ``CTUN.CRt``, int16 cm/s with multiplier 0.01, is stored in
+    m/s; ``BARO.SMS``, ms, in s). Multipliers are never applied twice. **Exception:** ``TimeUS``
+    is kept as the integer it is (µs since boot, exact), so signals can use it as their stamp
+    (``stamp = "TimeUS"``, ``stamp_scale = 1e-6``). Channel metadata: ``units`` (JSON
+    ``{field: unit}``; ``TimeUS`` -> ``"us"``, instance fields -> ``"instance"``, "" when
+    dimensionless or undeclared), ``multipliers`` (JSON ``{field: multiplier applied}``, only the
+    fields that were scaled), ``format`` (the DataFlash format string), ``type_id`` and
+    ``instance_field``. PX4 sdlog2 logs declare no units (``units`` is ``{}``).
+    ``float`` fields are written as the shortest decimal that gives back the same float32 (as
+    MAVLink records are); ``char`` fields as strings; ``a`` (int16[32]) as lists.
+
+Time base
+    The vehicle time of a message is its ``TimeUS`` (or ``TimeMS`` x 1000 in old APM logs, not
+    for ACC*/GYR*); a message without a time field (FMT, PX4 sdlog2 messages) takes the time of
+    the message before it (PX4: the last ``TIME.StartTime``; the first time in the log for
+    records before any time stamp).
+    ``publish_time`` = that vehicle time (ns since boot).
+    ``log_time`` = the same shifted to UNIX time when the log has a GPS time: the first ``GPS``
+    record with ``GWk > 0`` (ArduPilot: GPS week + ms of week, minus 18 leap seconds, as
+    pymavlink does) or ``GPSTime > 0`` (PX4, µs UNIX time) fixes the offset; otherwise
+    ``log_time`` = ``publish_time`` (boot-relative ns). The offset used, in ns, is stored in the
+    ``dataflash`` metadata record (``time_base`` ``"gps"`` or ``"boot"``, ``boot_to_unix_ns``).
+    ``gps_time=False`` forces boot-relative times.
+
+    Records are written in file order, so ``log_time`` may step back a little where types
+    interleave (each record keeps its own stamp); readers sort by time per topic.
+
+Damage
+    A log cut mid-message (the last record incomplete) ends cleanly:
+    ``skipped["truncated_tail"]`` and a warning. Bytes between records that are not records
+    (corruption, padding) are counted per run in ``skipped["garbage"]`` with a warning; records
+    whose type has an unusable FMT in ``skipped["bad_format"]``. DataFlash has no checksum, so a
+    record overwritten in place is converted as it reads; a time stamp beyond 10**15 µs is
+    replaced by the previous record's time (``repaired["implausible_time"]``). A file that does
+    not start with an FMT record (``A3 95 80``) defining a usable type (ArduPilot's first FMT
+    defines FMT itself; sdlog2's defines another type) raises
+    :class:`~livesweep.errors.LogFormatError` naming the file, and nothing is written.
+
+Memory: the file, DFReader's offset index and the decoded numpy records are held in memory
+(a few times the file size); Python values are built 65 536 records at a time.
+
+``format_version``: the firmware string of ``VER.FWS`` or of the first ``MSG`` that names the
+firmware (e.g. ``"ArduCopter V4.0.3"``; the git hash in brackets is dropped; it stays in the
+``MSG``/``VER`` channels), or ``"PX4 sdlog2 (<Arch>, git <hash>)"``; "" when the log has none.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import re
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from livesweep.convert.common import ConversionResult, ConversionWriter
+from livesweep.errors import ConfigError, LogFormatError
+
+__all__ = ["convert_dataflash"]
+
+_HEAD = b"\xa3\x95"
+_FMT_TYPE = 0x80
+_FMT_LEN = 89
+
+# DataFlash format character -> numpy dtype (little endian, packed)
+_NP = {
+    "b": "i1", "B": "u1", "M": "u1", "h": "<i2", "H": "<u2", "i": "<i4", "I": "<u4",
+    "q": "<i8", "Q": "<u8", "f": "<f4", "d": "<f8", "g": "<f2",
+    "n": "S4", "N": "S16", "Z": "S64", "a": ("<i2", (32,)),
+    "c": "<i2", "C": "<u2", "e": "<i4", "E": "<u4", "L": "<i4",
+}
+# format characters whose multiplier is implied by the format itself (divisors, exact)
+_IMPLIED = {"c": 100, "C": 100, "e": 100, "E": 100, "L": 10_000_000}
+_STRINGS = frozenset("nNZ")
+_FLOATS = frozenset("fdg")
+_NO_MULT = frozenset("-0?")     # FMTU multiplier ids that mean "none", "1" and "unknown"
+
+_FIRMWARE_RE = re.compile(r"^((?:Ardu\w+|APM:\w+|APMrover2|Rover|Blimp|AntennaTracker|ArduSub|PX4\w*)"
+                          r"\s+V?\d[\w.\-]*)")
+_GPS_EPOCH_S = 315_964_800          # 1980-01-06 in UNIX seconds
+_GPS_LEAP_S = 18                    # GPS - UTC since 2017 (what pymavlink's DFReader subtracts)
+_UNIX_MIN_NS, _UNIX_MAX_NS = 946_684_800 * 10**9, 4_102_444_800 * 10**9
+_WINDOW = 65_536                    # records turned into Python values at a time (bounds memory)
+_MAX_BOOT_US = 10**15               # ~32 years since boot: anything larger is a corrupt time stamp
+
+
+def _reader_class():
+    from pymavlink import DFReader
+
+    class _IndexOnly(DFReader.DFReader_binary):
+        """DFReader_binary without its clock search (a whole-file walk when there is no GPS):
+        livesweep computes the time base itself."""
+
+        def init_clock(self):
+            self.clock = None
+
+    return _IndexOnly
+
+
+def _text(b: bytes) -> str:
+    b = b.split(b"\x00", 1)[0]
+    try:
+        return b.decode("utf-8")
+    except UnicodeDecodeError:
+        return b.decode("latin-1")
+
+
+def _f32_decimal(x: np.ndarray) -> np.ndarray:
+    """float64 values that print (``repr``) as the shortest decimal giving back the same float32.
+
+    Vectorised version of ``float(str(np.float32(v)))``: for 1..9 significant digits, the
+    nearest decimal of that many digits is kept where it rounds to the same float32.
+    """
+    out = np.array(x, dtype=np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        x32 = out.astype(np.float32)        # values beyond float32 (after a multiplier) stay float64
+    idx = np.flatnonzero(np.isfinite(x32) & (x32 != 0.0))
+    if idx.size == 0:
+        return out
+    v = x32[idx].astype(np.float64)
+    v32 = x32[idx]
+    e = np.floor(np.log10(np.abs(v)))
+    res = v.copy()
+    # powers of ten are exact up to 1e22: outside that range (|v| < 1e-14 or > 1e22, rare) use str()
+    odd = np.flatnonzero((e < -14) | (e > 22))
+    for i in odd.tolist():
+        res[i] = float(str(v32[i]))
+    pending = np.flatnonzero((e >= -14) & (e <= 22))
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        for p in range(1, 10):
+            if pending.size == 0:
+                break
+            vp, k = v[pending], p - 1 - e[pending]
+            up = np.power(10.0, np.abs(k))
+            cand = np.where(k >= 0, np.round(vp * up) / up, np.round(vp / up) * up)
+            ok = cand.astype(np.float32) == v32[pending]
+            res[pending[ok]] = cand[ok]
+            pending = pending[~ok]
+    out[idx] = res
+    return out
+
+
+class _Type:
+    """One message type: its format, raw records, and how they become JSON values."""
+
+    __slots__ = ("tid", "name", "fmt", "columns", "offsets", "raw", "convs", "units", "mults", "instance",
+                 "topic")
+
+    def __init__(self, tid: int, name: str, fmt: str, columns: list[str]):
+        self.tid, self.name, self.fmt, self.columns = tid, name, fmt, columns
+        self.offsets = np.zeros(0, dtype=np.int64)
+        self.raw = None
+        self.convs: list = []          # per field: numpy column slice -> list of JSON values
+        self.units: dict[str, str] = {}
+        self.mults: dict[str, float] = {}
+        self.instance = ""
+        self.topic = ""
+
+    def rows(self, lo: int, hi: int) -> list[tuple]:
+        """Records ``lo:hi`` as tuples of JSON values (converted a slice at a time, to bound memory)."""
+        if not self.convs:
+            return [()] * (hi - lo)
+        raw = self.raw[lo:hi]
+        return list(zip(*(conv(raw[f"f{i}"]) for i, conv in enumerate(self.convs))))
+
+    def column(self, name: str) -> list:
+        i = self.columns.index(name)
+        return self.convs[i](self.raw[f"f{i}"])
+
+
+def _dtype(fmt: str) -> np.dtype:
+    names = [f"f{i}" for i in range(len(fmt))]
+    return np.dtype({"names": names, "formats": [_NP[c] for c in fmt]})
+
+
+def _check_head(src: Path, data: bytes) -> None:
+    if not data:
+        raise LogFormatError(f"{src}: the file is empty, not a DataFlash log")
+    if not data.startswith(_HEAD + bytes([_FMT_TYPE])):
+        raise LogFormatError(f"{src}: not an ArduPilot DataFlash / PX4 sdlog2 log: it does not start with the FMT "
+                             f"record (A3 95 80); first bytes {data[:8].hex(' ')}")
+    if len(data) < _FMT_LEN:
+        raise LogFormatError(f"{src}: corrupt DataFlash header: the file ({len(data)} bytes) is shorter than its "
+                             f"first FMT record ({_FMT_LEN} bytes)")
+    ftype, flen, name, fmt, cols = struct.unpack_from("<BB4s16s64s", data, 3)
+    name, fmt, cols = _text(name), _text(fmt), _text(cols)
+    why = ""
+    if not (1 <= len(name) <= 4 and name.isascii() and name.isprintable()):
+        why = f"name {name!r} is not 1-4 printable characters"
+    elif not fmt or any(c not in _NP for c in fmt):
+        why = f"format {fmt!r} has characters DataFlash does not define"
+    elif len(cols.split(",")) != len(fmt):
+        why = f"{len(cols.split(','))} column names for the {len(fmt)} fields of format {fmt!r}"
+    elif _dtype(fmt).itemsize + 3 != flen:
+        why = f"length {flen} does not match format {fmt!r} ({_dtype(fmt).itemsize + 3} bytes)"
+    elif ftype == _FMT_TYPE and (name != "FMT" or flen != _FMT_LEN):
+        why = f"type 128 must be FMT of length {_FMT_LEN}, got {name!r} of length {flen}"
+    if why:
+        raise LogFormatError(f"{src}: corrupt DataFlash header: the first record (FMT, A3 95 80) does not define a "
+                             f"message type: {why}")
+
+
+@contextlib.contextmanager
+def _captured_output():
+    """Collect what pymavlink prints while indexing (its Python prints and the Cython indexer's
+    C-level ones on file descriptor 2), instead of flooding the terminal; yields a list that
+    holds the text afterwards."""
+    import os
+    import sys
+    import tempfile
+
+    result: list[str] = []
+    py_out = io.StringIO()
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):      # no real stderr (embedded): Python-level only
+        with contextlib.redirect_stderr(py_out), contextlib.redirect_stdout(py_out):
+            yield result
+        result.append(py_out.getvalue())
+        return
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            with contextlib.redirect_stderr(py_out), contextlib.redirect_stdout(py_out):
+                yield result
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            result.append(tmp.read(1 << 16).decode("utf-8", "replace") + py_out.getvalue())
+
+
+def _index(src: Path):
+    """DFReader_binary's index of ``src``: (formats, offsets per type id, what it printed)."""
+    cls = _reader_class()
+    with _captured_output() as printed:
+        try:
+            reader = cls(str(src))
+        except Exception as e:  # noqa: BLE001 - DFReader raises bare Exceptions on bad FMT records
+            raise LogFormatError(f"{src}: corrupt DataFlash log: pymavlink's DFReader cannot index it "
+                                 f"({type(e).__name__}: {e})") from e
+    try:
+        formats = {t: f for t, f in reader.formats.items()}
+        offsets = {t: np.asarray(reader.offsets[t], dtype=np.int64) for t in range(256) if reader.offsets[t]}
+    finally:
+        with contextlib.suppress(Exception):
+            reader.data_map.close()
+        with contextlib.suppress(Exception):
+            reader.filehandle.close()
+    return formats, offsets, "".join(printed)
+
+
+def _decode_raw(buf: np.ndarray, offsets: np.ndarray, length: int, dtype: np.dtype) -> np.ndarray:
+    body = length - 3
+    if body == 0:
+        return np.zeros(offsets.size, dtype=dtype)
+    rows = buf[(offsets + 3)[:, None] + np.arange(body)[None, :]]
+    return np.ascontiguousarray(rows).view(dtype).reshape(-1)
+
+
+def _lookup_tables(types: dict[int, _Type]):
+    """UNIT id -> label, MULT id -> multiplier, type id -> (unit ids, mult ids), from the log itself."""
+    units: dict[str, str] = {}
+    mults: dict[str, float] = {}
+    fmtu: dict[int, tuple[str, str]] = {}
+    by_name = {t.name: t for t in types.values()}
+    u = by_name.get("UNIT")
+    if u is not None and u.raw is not None and {"Id", "Label"} <= set(u.columns):
+        ids, labels = u.raw[f"f{u.columns.index('Id')}"], u.raw[f"f{u.columns.index('Label')}"]
+        for i, lab in zip(ids.tolist(), labels.tolist()):
+            units[chr(i & 0xFF)] = _text(lab)
+    m = by_name.get("MULT")
+    if m is not None and m.raw is not None and {"Id", "Mult"} <= set(m.columns):
+        ids, vals = m.raw[f"f{m.columns.index('Id')}"], m.raw[f"f{m.columns.index('Mult')}"]
+        for i, v in zip(ids.tolist(), vals.tolist()):
+            mults[chr(i & 0xFF)] = float("%.7g" % v)     # logged as float32 cast to double
+    f = by_name.get("FMTU")
+    if f is not None and f.raw is not None and {"FmtType", "UnitIds", "MultIds"} <= set(f.columns):
+        c = f.columns
+        for t, ui, mi in zip(f.raw[f"f{c.index('FmtType')}"].tolist(), f.raw[f"f{c.index('UnitIds')}"].tolist(),
+                             f.raw[f"f{c.index('MultIds')}"].tolist()):
+            fmtu[int(t)] = (_text(ui), _text(mi))
+    return units, mults, fmtu
+
+
+def _scale(col: np.ndarray, mult: float) -> np.ndarray:
+    """``col * mult`` computed as a division by 1/mult when that is an integer (exact decimals)."""
+    x = col.astype(np.float64)
+    if 0.0 < mult < 1.0:
+        inv = 1.0 / mult
+        if abs(inv - round(inv)) < 1e-9 * inv:
+            return x / round(inv)
+    return x * mult
+
+
+def _as_list(col: np.ndarray) -> list:
+    return col.tolist()
+
+
+def _as_text(col: np.ndarray) -> list:
+    return [_text(b) for b in col.tolist()]
+
+
+def _as_f32(col: np.ndarray) -> list:
+    return _f32_decimal(col).tolist()
+
+
+def _divided(div: int):
+    return lambda col: (col.astype(np.float64) / div).tolist()
+
+
+def _multiplied(mult: float, f32: bool):
+    if f32:
+        return lambda col: _f32_decimal(_scale(col, mult)).tolist()
+    return lambda col: _scale(col, mult).tolist()
+
+
+def _plan(t: _Type, unit_tab: dict, mult_tab: dict, fmtu: dict) -> None:
+    """Units, multipliers and the value conversion of every field of one type."""
+    uids, mids = fmtu.get(t.tid, ("", ""))
+    if "#" in uids:
+        k = uids.index("#")
+        if k < len(t.columns):
+            t.instance = t.columns[k]
+    convs = []
+    for i, (name, ch) in enumerate(zip(t.columns, t.fmt)):
+        uid = uids[i] if i < len(uids) else ""
+        mid = mids[i] if i < len(mids) else ""
+        unit = "instance" if uid == "#" else unit_tab.get(uid, "")
+        if unit == "UNKNOWN":
+            unit = ""
+        if name == "TimeUS" and ch in "QqIi":          # kept as the exact integer µs since boot
+            t.units[name] = "us"
+            convs.append(_as_list)
+            continue
+        if uids or unit:
+            t.units[name] = unit
+        if ch in _STRINGS:
+            convs.append(_as_text)
+        elif ch == "a":
+            convs.append(_as_list)
+        elif ch in _IMPLIED:                            # the format's own multiplier, never FMTU's too
+            t.mults[name] = 1.0 / _IMPLIED[ch]
+            convs.append(_divided(_IMPLIED[ch]))
+        else:
+            mult = mult_tab.get(mid) if mid and mid not in _NO_MULT else None
+            if mult is not None and mult not in (0.0, 1.0):
+                t.mults[name] = mult
+                convs.append(_multiplied(mult, ch == "f"))
+            elif ch == "f":
+                convs.append(_as_f32)
+            else:   # integers, double, half float: exact as they are
+                convs.append(_as_list)
+    t.convs = convs
+
+
+def _schema(t: _Type) -> dict:
+    props = {}
+    for name, ch in zip(t.columns, t.fmt):
+        unit = t.units.get(name, "")
+        desc = f"DataFlash format {ch!r}" + (f", {unit}" if unit else "")
+        if name in t.mults:
+            desc += f" (raw x {t.mults[name]:g})"
+        if ch in _STRINGS:
+            p = {"type": "string"}
+        elif ch == "a":
+            p = {"type": "array", "items": {"type": "integer"}, "minItems": 32, "maxItems": 32}
+        elif ch in _FLOATS or name in t.mults:
+            p = {"type": ["number", "null"]}
+        else:
+            p = {"type": "integer"}
+        p["description"] = desc
+        props[name] = p
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "title": t.name,
+        "description": f"DataFlash message {t.name} (type {t.tid}, format {t.fmt!r}); values in the declared "
+                       "units with multipliers applied; TimeUS in integer microseconds since boot",
+        "type": "object",
+        "properties": props,
+        "required": list(t.columns),
+    }
+
+
+def _time_us(t: _Type) -> np.ndarray | None:
+    """The vehicle time [µs since boot] each record of ``t`` carries (-1 where implausible), or None."""
+    cols = t.columns
+    if "TimeUS" in cols:
+        raw, scale = t.raw[f"f{cols.index('TimeUS')}"], 1
+    elif cols and cols[0] == "TimeMS" and not t.name.startswith(("ACC", "GYR")):
+        raw, scale = t.raw["f0"], 1000
+    elif t.name == "TIME" and "StartTime" in cols:                  # PX4 sdlog2
+        raw, scale = t.raw[f"f{cols.index('StartTime')}"], 1
+    else:
+        return None
+    if raw.dtype.kind not in "iu":
+        return None
+    x = raw.astype(np.float64) * scale          # range check first: uint64 garbage would wrap in int64
+    ok = (x >= 0) & (x <= _MAX_BOOT_US)
+    return np.where(ok, raw.astype(np.int64) * scale, -1)
+
+
+def _gps_offset_ns(types: dict[int, _Type], order_pos: dict[int, np.ndarray], vt_us: np.ndarray) -> int | None:
+    """UNIX ns minus boot ns, from the first GPS record with a valid GPS time (None: no GPS time)."""
+    best = None    # (global position, offset_ns)
+    for t in types.values():
+        if not t.name.startswith("GPS") or t.raw is None or not t.offsets.size:
+            continue
+        c = t.columns
+        pos = order_pos[t.tid]
+        if {"GWk", "GMS"} <= set(c) and "TimeUS" in c:
+            wk = t.raw[f"f{c.index('GWk')}"].astype(np.int64)
+            ms = t.raw[f"f{c.index('GMS')}"].astype(np.int64)
+            unix_ns = ((_GPS_EPOCH_S - _GPS_LEAP_S + 604_800 * wk) * 1000 + ms) * 1_000_000
+            ok = np.flatnonzero((wk > 0) & (unix_ns >= _UNIX_MIN_NS) & (unix_ns <= _UNIX_MAX_NS) & (vt_us[pos] >= 0))
+            if ok.size:
+                i = ok[0]
+                cand = (int(pos[i]), int(unix_ns[i]) - int(vt_us[pos[i]]) * 1000)
+                best = cand if best is None or cand[0] < best[0] else best
+        elif "GPSTime" in c:
+            graw = t.raw[f"f{c.index('GPSTime')}"]
+            gns = graw.astype(np.float64) * 1000           # range check in float: garbage would wrap
+            ok = np.flatnonzero((gns >= _UNIX_MIN_NS) & (gns <= _UNIX_MAX_NS))
+            gt = graw.astype(np.int64)
+            if ok.size:
+                i = ok[0]
+                cand = (int(pos[i]), int(gt[i]) * 1000 - int(vt_us[pos[i]]) * 1000)
+                best = cand if best is None or cand[0] < best[0] else best
+    return None if best is None else best[1]
+
+
+def _firmware(types: dict[int, _Type]) -> str:
+    by_name = {t.name: t for t in types.values() if t.offsets.size}
+    ver, msg = by_name.get("VER"), by_name.get("MSG")
+    for t, field in ((ver, "FWS"), (msg, "Message")):
+        if t is not None and field in t.columns:
+            for s in t.column(field):
+                m = _FIRMWARE_RE.match(s.strip())
+                if m:
+                    return m.group(1)
+    if ver is not None and "FwGit" in ver.columns:
+        arch = ver.column("Arch")[0] if "Arch" in ver.columns else "?"
+        return f"PX4 sdlog2 ({arch}, git {ver.column('FwGit')[0][:8]})"
+    return ""
+
+
+def convert_dataflash(src, out, *, gps_time: bool = True, **options) -> ConversionResult:
+    """Convert the DataFlash / sdlog2 log ``src`` to the MCAP file ``out`` (see the module docstring).
+
+    Parameters
+    ----------
+    src, out : str or Path
+    gps_time : bool
+        Shift ``log_time`` to UNIX time with the log's first GPS time (default); False keeps
+        boot-relative times.
+
+    Returns
+    -------
+    ConversionResult
+
+    Raises
+    ------
+    LogFormatError
+        ``src`` missing, empty, not DataFlash or with a corrupt header (naming the file), or
+        ``out`` cannot be written; nothing is left at ``out`` then.
+    ConfigError
+        An option this converter does not take.
+    """
+    src, out = Path(src), Path(out)
+    if options:
+        raise ConfigError(f"{src}: option(s) {', '.join(sorted(options))} do not apply to a DataFlash log "
+                          "(convert_dataflash takes gps_time only)")
+    try:
+        data = src.read_bytes()
+    except OSError as e:
+        raise LogFormatError(f"{src}: cannot be read: {e.strerror or e}") from None
+    _check_head(src, data)
+    formats, offsets, chatter = _index(src)
+    n_bytes = len(data)
+    buf = np.frombuffer(data, dtype=np.uint8)
+
+    warnings: list[str] = []
+    skipped: dict[str, int] = {}
+
+    def skip(reason: str, n: int, text: str) -> None:
+        skipped[reason] = skipped.get(reason, 0) + n
+        warnings.append(text)
+
+    # ---- decode every type, column-wise
+    types: dict[int, _Type] = {}
+    spans = []              # (offset, end) of every record DFReader indexed, for the damage check
+    for tid, offs in offsets.items():
+        f = formats.get(tid)
+        if f is None:
+            continue
+        fmt = "".join(f.format) if not isinstance(f.format, str) else f.format
+        t = _Type(tid, f.name, fmt, list(f.columns))
+        length = int(f.len)
+        spans.append(np.stack([offs, offs + length], axis=1))
+        complete = offs[offs + length <= n_bytes]     # a cut last record is counted with the tail below
+        try:
+            dt = _dtype(fmt)
+            if dt.itemsize != length - 3 or len(fmt) != len(t.columns):
+                raise ValueError(f"format {fmt!r} packs {dt.itemsize} bytes and {len(fmt)} fields; FMT says "
+                                 f"{length - 3} bytes and {len(t.columns)} columns")
+        except (KeyError, ValueError, TypeError) as e:
+            skip("bad_format", int(complete.size), f"{complete.size} {t.name} records skipped: unusable FMT ({e})")
+            continue
+        t.offsets = complete
+        t.raw = _decode_raw(buf, complete, length, dt) if complete.size else np.zeros(0, dtype=dt)
+        types[tid] = t
+
+    # ---- damage: bytes no record covers (between records, and a cut or garbage tail)
+    if spans:
+        sp = np.concatenate(spans)
+        sp = sp[np.argsort(sp[:, 0], kind="stable")]
+        ends = np.maximum.accumulate(sp[:, 1])
+        gap_from = np.concatenate([[0], ends[:-1]])
+        gaps = np.flatnonzero(sp[:, 0] > gap_from)
+        if gaps.size:
+            nbytes = int((sp[gaps, 0] - gap_from[gaps]).sum())
+            skip("garbage", int(gaps.size), f"{gaps.size} runs of bytes that are not DataFlash records skipped "
+                                            f"({nbytes} bytes, first at offset {int(gap_from[gaps[0]])})")
+        end = int(ends[-1])
+    else:
+        end = 0
+    if end > n_bytes:       # the last indexed record runs past the end of the file
+        skip("truncated_tail", 1, f"the log ends mid-message: the last record (at offset {int(sp[-1, 0])}) is cut; "
+                                  f"{n_bytes - int(sp[-1, 0])} bytes ignored")
+    elif end < n_bytes:
+        tail = data[end:]
+        if tail[:2] == _HEAD[: len(tail[:2])] and (len(tail) < 3 or tail[2] in formats):
+            skip("truncated_tail", 1, f"the log ends mid-message: {len(tail)} bytes of a cut record at offset {end} "
+                                      "ignored")
+        else:
+            skip("garbage", 1, f"{len(tail)} bytes after the last record (offset {end}) are not DataFlash records; "
+                               "ignored")
+    said = [ln for ln in chatter.splitlines() if ln.strip() and not ln.startswith("bad header")]
+    if said:       # "bad header" lines are the garbage counted above; anything else is news
+        warnings.append("pymavlink DFReader: " + said[0] + (f" (and {len(said) - 1} more lines)" if len(said) > 1 else ""))
+
+    # ---- values, units, multipliers
+    unit_tab, mult_tab, fmtu = _lookup_tables(types)
+    for t in types.values():
+        _plan(t, unit_tab, mult_tab, fmtu)
+
+    # ---- file order and times
+    live = [t for t in types.values() if t.offsets.size]
+    all_offs = np.concatenate([t.offsets for t in live]) if live else np.zeros(0, dtype=np.int64)
+    type_of = np.concatenate([np.full(t.offsets.size, k) for k, t in enumerate(live)]) if live else all_offs
+    order = np.argsort(all_offs, kind="stable")
+    n = order.size
+    vt = np.full(n, -1, dtype=np.int64)             # vehicle time [µs], in file order
+    order_pos: dict[int, np.ndarray] = {}
+    inv = np.empty(n, dtype=np.int64)
+    inv[order] = np.arange(n)
+    start = 0
+    bad_time = 0
+    for t in live:
+        pos = inv[start:start + t.offsets.size]
+        order_pos[t.tid] = pos
+        tu = _time_us(t)
+        if tu is not None:
+            vt[pos] = tu
+            bad_time += int((tu < 0).sum())
+        start += t.offsets.size
+    have = vt >= 0
+    if have.any():
+        first = int(vt[np.argmax(have)])
+        idx = np.where(have, np.arange(n), -1)
+        np.maximum.accumulate(idx, out=idx)
+        vt = np.where(idx >= 0, vt[np.maximum(idx, 0)], first)
+    else:
+        vt[:] = 0
+        warnings.append("no record carries a time stamp (TimeUS/TimeMS/TIME): every time is 0")
+    if bad_time:
+        warnings.append(f"{bad_time} records with an impossible time stamp (over {_MAX_BOOT_US} us since boot) "
+                        "take the time of the record before them")
+    offset_ns = _gps_offset_ns(types, order_pos, vt) if gps_time else None
+    time_base = "gps" if offset_ns is not None else "boot"
+    pub_ns = vt * 1000
+    log_ns = pub_ns + (offset_ns or 0)
+
+    # ---- write
+    with ConversionWriter(src, out, "dataflash", _firmware(types)) as w:
+        writer = w.writer
+        names_used: dict[str, int] = {}
+        for t in types.values():
+            topic = f"/dataflash/{t.name}"
+            if t.name in names_used and names_used[t.name] != t.tid:
+                topic = f"/dataflash/{t.name}_{t.tid}"
+                warnings.append(f"two FMT types are named {t.name!r} (ids {names_used[t.name]} and {t.tid}): "
+                                f"the second is written on {topic}")
+            names_used.setdefault(t.name, t.tid)
+            t.topic = topic
+            meta = {"units": json.dumps(t.units), "multipliers": json.dumps(t.mults), "format": t.fmt,
+                    "type_id": str(t.tid), "instance_field": t.instance}
+            writer.add_channel(topic, f"dataflash.{t.name}", _schema(t), meta)
+        writer.add_metadata("dataflash", {"time_base": time_base, "boot_to_unix_ns": str(offset_ns or 0),
+                                          "units_declared": str(bool(fmtu)).lower()})
+        keys = [t.columns for t in live]
+        topics = [t.topic for t in live]
+        write = writer.write
+        tsel = type_of[order]
+        cursor = [0] * len(live)
+        for k0 in range(0, n, _WINDOW):            # Python values for a window of records at a time
+            k1 = min(n, k0 + _WINDOW)
+            win = tsel[k0:k1]
+            pending = {}
+            for ti, cnt in enumerate(np.bincount(win, minlength=len(live)).tolist()):
+                if cnt:
+                    pending[ti] = iter(live[ti].rows(cursor[ti], cursor[ti] + cnt))
+                    cursor[ti] += cnt
+            for ti, lt, pt in zip(win.tolist(), log_ns[k0:k1].tolist(), pub_ns[k0:k1].tolist()):
+                write(topics[ti], dict(zip(keys[ti], next(pending[ti]))), log_time_ns=lt, publish_time_ns=pt)
+        w.messages_read = int(n)
+        if bad_time:
+            w.repair("implausible_time", bad_time)
+        for reason, count in skipped.items():
+            w.skip(reason, count)
+        for text in warnings:
+            w.warn(text)
+        return w.finish()
