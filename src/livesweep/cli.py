@@ -502,12 +502,37 @@ def build_parser() -> argparse.ArgumentParser:
                    help="last stage to run (default: every stage the case defines)")
     i.set_defaults(func=cmd_identify)
 
+    c = sub.add_parser("convert", help="convert a tlog, DataFlash .bin, PX4 .px4log/.ulg, .npy or delimited text log to MCAP")
+    c.add_argument("src", help="the log (its format is recognised by content, not by name)")
+    c.add_argument("--out", required=True, help="MCAP file to write")
+    c.add_argument("--columns", help="column map (TOML) for .npy and text tables")
+    c.set_defaults(func=cmd_convert)
+
+    from livesweep.batch import add_batch_arguments
+
+    b = sub.add_parser("batch", help="run many identifications in parallel (local cores or a Dask cluster), resumable")
+    add_batch_arguments(b)
+
     d = sub.add_parser("demo", help="fly simulated XV-15 sweeps live into the monitor, record them, identify frequency responses")
     d.add_argument("--out", help="folder for the recording, the .rrd and the report (default: a new temporary folder)")
     d.add_argument("--speed", type=_positive_float, default=10.0, help="simulator pace, x real time (default 10)")
     d.add_argument("--view", action="store_true", help="open the Rerun viewer instead of writing live.rrd")
     d.set_defaults(func=cmd_demo)
     return p
+
+
+def cmd_convert(args) -> int:
+    """Convert a log to MCAP and print what was read, skipped and repaired."""
+    from livesweep.convert import convert
+
+    options = {"column_map": args.columns} if args.columns else {}
+    res = convert(args.src, args.out, **options)
+    print(f"{res.source.name} ({res.format}{', ' + res.format_version if res.format_version else ''}) -> {res.output}")
+    print(f"  messages read {res.messages_read}, written {res.messages_written} on {len(res.topics)} channels")
+    print(f"  skipped: {res.skipped or 'none'}; repaired: {res.repaired or 'none'}")
+    for w in res.warnings:
+        print(f"  warning: {w}")
+    return 0
 
 
 def main(argv=None) -> int:
