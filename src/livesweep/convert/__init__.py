@@ -13,6 +13,7 @@ format         module                                      channels
 ``ulog``       :mod:`livesweep.convert.ulog` (pyulog)      ``/ulog/<topic>`` (``/<topic>/<i>``)
 ``numpy``      :mod:`livesweep.convert.table`              ``/table/<name>`` (column map)
 ``text``       :mod:`livesweep.convert.table`              ``/table/<name>`` (column map)
+``matlab``     :mod:`livesweep.convert.table`              ``/table/<name>`` (v5 .mat, column map)
 ``mcap``       (already MCAP: refused with a clear error)
 =============  ==========================================  ======================================
 """
@@ -34,6 +35,7 @@ CONVERTERS = {
     "ulog": "livesweep.convert.ulog:convert_ulog",
     "numpy": "livesweep.convert.table:convert_table",
     "text": "livesweep.convert.table:convert_table",
+    "matlab": "livesweep.convert.table:convert_table",
 }
 
 

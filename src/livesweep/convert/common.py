@@ -18,6 +18,7 @@ __all__ = ["ConversionResult", "ConversionWriter", "sniff_format", "sha256_of"]
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
 _ULOG_MAGIC = b"ULog\x01\x12\x35"
 _NUMPY_MAGIC = b"\x93NUMPY"
+_MATLAB_MAGIC = b"MATLAB 5.0 MAT-file"
 _DATAFLASH_HEAD = b"\xa3\x95\x80"          # HEAD1 HEAD2 FMT: every DataFlash / sdlog2 log starts with FMT
 
 
@@ -46,7 +47,7 @@ def _plausible_tlog(head: bytes) -> bool:
 
 def sniff_format(path) -> str:
     """The file's format from its first bytes: ``mcap``, ``ulog``, ``dataflash``, ``numpy``,
-    ``tlog`` or ``text``.
+    ``matlab`` (v5 .mat), ``tlog`` or ``text``.
 
     Raises
     ------
@@ -66,6 +67,8 @@ def sniff_format(path) -> str:
         return "ulog"
     if head.startswith(_NUMPY_MAGIC):
         return "numpy"
+    if head.startswith(_MATLAB_MAGIC):
+        return "matlab"
     if head.startswith(_DATAFLASH_HEAD):
         return "dataflash"
     if _plausible_tlog(head):
@@ -79,7 +82,7 @@ def sniff_format(path) -> str:
         return "text"
     raise LogFormatError(f"{path}: unknown or unsupported format (first bytes {head[:8].hex(' ')}); livesweep "
                          "converts MAVLink .tlog, ArduPilot DataFlash .bin (and PX4 sdlog2), PX4 ULog, "
-                         "NumPy .npy and delimited text")
+                         "NumPy .npy, MATLAB v5 .mat and delimited text")
 
 
 @dataclass(frozen=True)

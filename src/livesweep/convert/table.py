@@ -1,4 +1,7 @@
-"""Tables (NumPy ``.npy`` and delimited text) to livesweep's MCAP: one channel ``/table/<name>``.
+"""Tables (NumPy ``.npy``, MATLAB v5 ``.mat`` and delimited text) to livesweep's MCAP: one channel
+``/table/<name>``. A ``.mat`` file's numeric 2-D variables (the most common row count) are read
+side by side with the columns named ``<variable>[<j>]``, so a column map selects them with
+``header = "outr[2]"``.
 
 Every row becomes one message whose fields are the mapped columns (``scale * raw + offset``) and
 ``time_s``, the time column in seconds. ``log_time`` and ``publish_time`` both come from the time
@@ -268,6 +271,29 @@ def _read_npy(src: Path) -> _Table:
                   f"NumPy .npy v{major}.{minor}, {a.dtype}, {a.shape[0]} x {a.shape[1]}")
 
 
+def _read_mat(src: Path) -> _Table:
+    """A MATLAB v5 .mat file: every numeric 2-D variable with the most common row count, side by
+    side, the columns named ``<variable>[<j>]`` (e.g. ``outr[2]``; a column vector is ``t[0]``)."""
+    import scipy.io
+
+    try:
+        m = scipy.io.loadmat(src)
+    except (ValueError, OSError, TypeError, NotImplementedError) as e:
+        raise LogFormatError(f"{src}: cannot read as a MATLAB v5 .mat file: {e}") from e
+    arrays = {k: np.asarray(v) for k, v in m.items() if not k.startswith("__") and isinstance(v, np.ndarray)
+              and v.ndim == 2 and v.dtype.kind in "biuf" and v.size}
+    if not arrays:
+        raise LogFormatError(f"{src}: the .mat file holds no numeric 2-D variable")
+    arrays = {k: (v if v.shape[0] >= v.shape[1] else v.T) for k, v in arrays.items()}
+    rows = [v.shape[0] for v in arrays.values()]
+    n = max(set(rows), key=rows.count)
+    keep = {k: v for k, v in arrays.items() if v.shape[0] == n}
+    headers = tuple(f"{k}[{j}]" for k, v in keep.items() for j in range(v.shape[1]))
+    values = np.column_stack([v.astype(np.float64) for v in keep.values()])
+    version = m.get("__header__", b"").decode("latin-1", "replace").split(",")[0].strip()
+    return _Table(values, headers, None, f"{version or 'MATLAB v5'}, variables {', '.join(keep)}, {n} rows")
+
+
 def _guess_delim(line: str):
     for d in ("\t", ",", ";", "|"):
         if d in line:
@@ -345,8 +371,16 @@ def read_table(src, cmap: ColumnMap | None = None):
     """The table as ``(values (rows, cols) float64, header names or None, format_version)``."""
     src = Path(src)
     fmt = sniff_format(src)
-    t = _read_npy(src) if fmt == "numpy" else _read_text(src, cmap)
+    t = _read_any(src, fmt, cmap)
     return t.values, t.headers, t.version
+
+
+def _read_any(src: Path, fmt: str, cmap) -> _Table:
+    if fmt == "numpy":
+        return _read_npy(src)
+    if fmt == "matlab":
+        return _read_mat(src)
+    return _read_text(src, cmap)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -419,9 +453,9 @@ def convert_table(src: Path, out: Path, column_map=None, **options) -> Conversio
     src, out = Path(src), Path(out)
     cmap = load_column_map(column_map)
     fmt = sniff_format(src)
-    if fmt not in ("numpy", "text"):
-        raise LogFormatError(f"{src}: is {fmt}, not a NumPy or text table")
-    table = _read_npy(src) if fmt == "numpy" else _read_text(src, cmap)
+    if fmt not in ("numpy", "text", "matlab"):
+        raise LogFormatError(f"{src}: is {fmt}, not a NumPy, MATLAB or text table")
+    table = _read_any(src, fmt, cmap)
     if table.values.shape[0] == 0:
         raise LogFormatError(f"{src}: the table has no rows")
     warnings: list[str] = []
