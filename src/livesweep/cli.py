@@ -224,8 +224,11 @@ def cmd_identify(args) -> int:
 
     prepare_out_dir(args.out)
     case = load_case(args.case)
-    if case.tables.get("state_space"):
-        residual_settings(case)                 # a bad [residual] table fails before any work
+    if case.tables.get("state_space"):          # bad model tables fail before any work
+        from livesweep.ident.state_space import StateSpaceModel
+
+        StateSpaceModel.from_table(case.tables["state_space"], where=f"{case.path}: state_space")
+        residual_settings(case)
     last = STAGES.index(args.stage)
     t0 = time.monotonic()
 
