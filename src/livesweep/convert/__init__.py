@@ -14,6 +14,7 @@ format         module                                      channels
 ``numpy``      :mod:`livesweep.convert.table`              ``/table/<name>`` (column map)
 ``text``       :mod:`livesweep.convert.table`              ``/table/<name>`` (column map)
 ``matlab``     :mod:`livesweep.convert.table`              ``/table/<name>`` (v5 .mat, column map)
+``parquet``    :mod:`livesweep.convert.table`              ``/table/<name>`` (column map optional)
 ``mcap``       (already MCAP: refused with a clear error)
 =============  ==========================================  ======================================
 """
@@ -36,6 +37,7 @@ CONVERTERS = {
     "numpy": "livesweep.convert.table:convert_table",
     "text": "livesweep.convert.table:convert_table",
     "matlab": "livesweep.convert.table:convert_table",
+    "parquet": "livesweep.convert.table:convert_table",
 }
 
 

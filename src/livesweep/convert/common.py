@@ -19,6 +19,7 @@ _MCAP_MAGIC = b"\x89MCAP0\r\n"
 _ULOG_MAGIC = b"ULog\x01\x12\x35"
 _NUMPY_MAGIC = b"\x93NUMPY"
 _MATLAB_MAGIC = b"MATLAB 5.0 MAT-file"
+_PARQUET_MAGIC = b"PAR1"
 _DATAFLASH_HEAD = b"\xa3\x95\x80"          # HEAD1 HEAD2 FMT: every DataFlash / sdlog2 log starts with FMT
 
 
@@ -47,7 +48,7 @@ def _plausible_tlog(head: bytes) -> bool:
 
 def sniff_format(path) -> str:
     """The file's format from its first bytes: ``mcap``, ``ulog``, ``dataflash``, ``numpy``,
-    ``matlab`` (v5 .mat), ``tlog`` or ``text``.
+    ``matlab`` (v5 .mat), ``parquet``, ``tlog`` or ``text``.
 
     Raises
     ------
@@ -69,6 +70,8 @@ def sniff_format(path) -> str:
         return "numpy"
     if head.startswith(_MATLAB_MAGIC):
         return "matlab"
+    if head.startswith(_PARQUET_MAGIC):
+        return "parquet"
     if head.startswith(_DATAFLASH_HEAD):
         return "dataflash"
     if _plausible_tlog(head):
@@ -82,7 +85,7 @@ def sniff_format(path) -> str:
         return "text"
     raise LogFormatError(f"{path}: unknown or unsupported format (first bytes {head[:8].hex(' ')}); livesweep "
                          "converts MAVLink .tlog, ArduPilot DataFlash .bin (and PX4 sdlog2), PX4 ULog, "
-                         "NumPy .npy, MATLAB v5 .mat and delimited text")
+                         "NumPy .npy, MATLAB v5 .mat, Parquet and delimited text")
 
 
 @dataclass(frozen=True)

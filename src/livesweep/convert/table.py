@@ -1,5 +1,5 @@
-"""Tables (NumPy ``.npy``, MATLAB v5 ``.mat`` and delimited text) to livesweep's MCAP: one channel
-``/table/<name>``. A ``.mat`` file's numeric 2-D variables (the most common row count) are read
+"""Tables (NumPy ``.npy``, MATLAB v5 ``.mat``, Apache Parquet and delimited text) to livesweep's
+MCAP: one channel ``/table/<name>``. A ``.mat`` file's numeric 2-D variables (the most common row count) are read
 side by side with the columns named ``<variable>[<j>]``, so a column map selects them with
 ``header = "outr[2]"``.
 
@@ -294,6 +294,36 @@ def _read_mat(src: Path) -> _Table:
     return _Table(values, headers, None, f"{version or 'MATLAB v5'}, variables {', '.join(keep)}, {n} rows")
 
 
+def _read_parquet(src: Path) -> _Table:
+    """An Apache Parquet file (pyarrow, which rerun-sdk already requires): its numeric and boolean
+    columns side by side under their own names; other columns are left out (named in the version
+    text)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    try:
+        t = pq.read_table(src)
+    except (pa.ArrowException, OSError, ValueError) as e:
+        raise LogFormatError(f"{src}: cannot read as a Parquet file: {e}") from e
+    names, cols, dropped = [], [], []
+    for name, col in zip(t.column_names, t.columns):
+        typ = col.type
+        if pa.types.is_integer(typ) or pa.types.is_floating(typ) or pa.types.is_boolean(typ):
+            a = col.to_numpy(zero_copy_only=False)
+            names.append(name)
+            cols.append(np.where(np.equal(a, None), np.nan, a).astype(np.float64) if a.dtype == object
+                        else a.astype(np.float64))
+        else:
+            dropped.append(name)
+    if not cols:
+        raise LogFormatError(f"{src}: the Parquet file has no numeric column")
+    meta = pq.ParquetFile(src).metadata
+    version = f"Parquet {meta.format_version}, {t.num_rows} rows x {len(cols)} numeric columns"
+    if dropped:
+        version += f" (non-numeric left out: {', '.join(dropped)})"
+    return _Table(np.column_stack(cols), tuple(names), None, version)
+
+
 def _guess_delim(line: str):
     for d in ("\t", ",", ";", "|"):
         if d in line:
@@ -380,6 +410,8 @@ def _read_any(src: Path, fmt: str, cmap) -> _Table:
         return _read_npy(src)
     if fmt == "matlab":
         return _read_mat(src)
+    if fmt == "parquet":
+        return _read_parquet(src)
     return _read_text(src, cmap)
 
 
@@ -453,8 +485,8 @@ def convert_table(src: Path, out: Path, column_map=None, **options) -> Conversio
     src, out = Path(src), Path(out)
     cmap = load_column_map(column_map)
     fmt = sniff_format(src)
-    if fmt not in ("numpy", "text", "matlab"):
-        raise LogFormatError(f"{src}: is {fmt}, not a NumPy, MATLAB or text table")
+    if fmt not in ("numpy", "text", "matlab", "parquet"):
+        raise LogFormatError(f"{src}: is {fmt}, not a NumPy, MATLAB, Parquet or text table")
     table = _read_any(src, fmt, cmap)
     if table.values.shape[0] == 0:
         raise LogFormatError(f"{src}: the table has no rows")
