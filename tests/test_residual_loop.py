@@ -41,17 +41,27 @@ def _table():
     return copy.deepcopy(load_case(CASE).tables["state_space"])
 
 
-def _data(effects, seed):
+def _late(values, names, name, samples):
+    """The logged input ``name`` recorded ``samples`` late (first value held)."""
+    if name is not None:
+        k = names.index(name)
+        values[k] = np.concatenate([np.full(samples, values[k, 0]), values[k, :-samples]])
+    return values
+
+
+def _data(effects, seed, late=(None, 0)):
     sc = sweep_scenario("xv15-cruise", axes=("da", "dr"), repeats=2, omega_min_rad_s=BAND[0], omega_max_rad_s=BAND[1],
                         duration_s=100.0, amplitudes={"da": 3.0, "dr": 3.0}, off_axis_rms=0.2, seed=seed,
                         effects=tuple(effects), turbulence_scale=TURBULENCE)
     values, names = simulated_record(simulate(sc))
+    values = _late(values, names, *late)
     values = values - values.mean(axis=1, keepdims=True)
     frs = analyze(values, names, 50.0, ["da", "dr"], list(OUTPUTS), BAND, windows_s=WINDOWS).best
     vs = verification_scenario("xv15-cruise", manoeuvres=(("da", "doublet", 2.0, 1.0), ("dr", "doublet", 3.0, 1.5),
                                                           ("da", "3211", 1.5, 0.7)),
                                effects=tuple(effects), seed=seed + 100, turbulence_scale=0.3)
     vv, vn = simulated_record(simulate(vs))
+    vv = _late(vv, vn, *late)
     t = np.arange(vv.shape[1]) / 50.0
     u = np.vstack([vv[vn.index(n)] for n in ("da", "dr")])
     y = np.vstack([vv[vn.index(n)] for n in OUTPUTS])
@@ -59,13 +69,13 @@ def _data(effects, seed):
     def check(model, theta):
         M, F, G, H, J, tau = model.matrices(theta)
         return verify(M, F, G, H, J, tau, t, u, y, output_names=list(OUTPUTS),
-                      output_delays=model.output_delays_s(theta))
+                      output_delays=model.output_delays_s(theta), input_skews=model.input_skews_s(theta))
 
     return frs, check
 
 
-def _loop(effects, edit=None, seed=11):
-    frs, check = _data(effects, seed)
+def _loop(effects, edit=None, seed=11, late=(None, 0)):
+    frs, check = _data(effects, seed, late)
     table = _table()
     if edit:
         edit(table)
@@ -126,6 +136,22 @@ def test_undeclared_effect_is_found_identified_and_halves_the_cost(name):
     assert loop.steps[-1].effect is None and loop.conclusion.startswith("added")
 
 
+def test_an_input_logged_late_is_found_as_its_sensor_skew():
+    """The rudder command logged 80 ms late: the outputs lead it by 80 - 33 ms (the true rudder
+    delay), the free delay tau_r sits at its bound 0, and the loop adds a skew of the dr
+    measurement (tau_r then held at 0: only the net delay is identifiable)."""
+    loop = _loop([], late=("dr", 4))
+    first = loop.steps[0]
+    print(f"\n{loop.conclusion}; top {[c.to_dict() for c in first.candidates[:3]]}")
+    assert (first.candidates[0].kind, first.candidates[0].where) == ("sensor_skew", "dr")
+    assert first.effect is not None and (first.effect["kind"], first.effect["where"]) == ("sensor_skew", "dr")
+    (skew,) = first.effect["parameters"]
+    truth = 0.08 - TRUTH.input_delays_s[1]
+    assert abs(skew["value"] - truth) <= 3 * skew["cramer_rao_pct"] / 100 * skew["value"], (skew, truth)
+    assert loop.fit.parameter("tau_r").fixed and loop.fit.value("tau_r") == 0.0
+    assert loop.fit.cost_average <= 0.5 * first.cost_before
+
+
 def test_two_effects_at_once_are_both_found():
     loop = _loop([make_effect("sensor_skew", output="p", delay_s=0.06),
                   make_effect("actuator_lag", input="dr", time_constant_s=0.125)])
@@ -184,10 +210,11 @@ AUGMENTATIONS = [
     (Candidate("sensor_skew", "beta", {"tau_s": 0.05}, 0.0), ("out", 3, np.exp(-0.05 * S))),
     (Candidate("scale_factor", "ay", {"factor": 1.2}, 0.0), ("out", 2, 1.2 + 0 * S)),
     (Candidate("time_delay", "dr", {"tau_s": 0.04}, 0.0), ("in", 1, np.exp(-0.04 * S))),
+    (Candidate("sensor_skew", "da", {"tau_s": 0.03}, 0.0), ("in", 0, np.exp(+0.03 * S))),
 ]
 
 
-@pytest.mark.parametrize("cand, expect", AUGMENTATIONS, ids=[c.kind for c, _ in AUGMENTATIONS])
+@pytest.mark.parametrize("cand, expect", AUGMENTATIONS, ids=[f"{c.kind}-{c.where}" for c, _ in AUGMENTATIONS])
 def test_augmented_model_is_the_nominal_times_the_effect(cand, expect):
     """Every pair the effect touches is multiplied by its analytic factor (ay carries a feed-through
     J term, so input effects reach it through the added states too); the others are unchanged."""

@@ -181,6 +181,31 @@ def test_output_delay_is_a_pure_skew_on_that_outputs_pairs_with_an_exact_jacobia
     np.testing.assert_allclose(D[:, col], num, rtol=1e-5, atol=1e-6 * np.abs(num).max())
 
 
+def test_input_skew_advances_that_inputs_pairs_with_an_exact_jacobian(cruise):
+    """An input measured late (``input_skews``): exp(+jw tau_s) on every dr pair, so the net input
+    delay tau_r - tau_s may be negative."""
+    _, frs = cruise
+    base = StateSpaceModel.from_table(_table(CRUISE))
+    table = _table(CRUISE)
+    table["input_skews"] = {"dr": "skew_dr"}
+    table["parameters"]["skew_dr"] = {"value": 0.08}
+    m = StateSpaceModel.from_table(table)
+    w = np.geomspace(0.3, 20, 50)
+    expected = base.frequency_response(base.initial, w)
+    expected[:, 1] *= np.exp(+1j * w * 0.08)
+    np.testing.assert_allclose(m.frequency_response(m.initial, w), expected, rtol=1e-12, atol=0)
+    assert m.input_skews_s(m.initial).tolist() == [0.0, 0.08]
+    pairs, _ = select_pairs(frs, m)
+    prob = _Problem(m, pairs)
+    k = m.index("skew_dr")
+    _, D = prob.residuals_and_jacobian(m.initial, m.free)
+    tp, tm = m.initial.copy(), m.initial.copy()
+    tp[k] += 1e-6
+    tm[k] -= 1e-6
+    num = (prob.residuals(tp) - prob.residuals(tm)) / 2e-6
+    np.testing.assert_allclose(D[:, list(m.free).index(k)], num, rtol=1e-5, atol=1e-6 * np.abs(num).max())
+
+
 # --- bad input ---------------------------------------------------------------------------------
 
 def _assert_raises_config_error(mutate, match):

@@ -186,7 +186,10 @@ class _Space:
         self.r = np.concatenate([np.concatenate([r.magnitude_db, r.phase_deg]) for r in self.res]) / self.sig
         self.model, self.theta = model, theta
         self.full = self.log_jacobian_all(model, theta)
-        free = np.flatnonzero(~np.asarray(model.fixed))
+        # free parameters that may re-adjust; a delay held at its bound 0 cannot go negative, so
+        # it does not absorb a phase lead (it stays out of the projection)
+        at_bound = {k for k in model.delay_parameter_indices() if theta[k] <= 1e-9}
+        free = [k for k in np.flatnonzero(~np.asarray(model.fixed)) if k not in at_bound]
         D = self.full[:, free]
         if D.shape[1]:
             D = D / np.maximum(np.linalg.norm(D, axis=0), 1e-300)
@@ -323,10 +326,12 @@ def diagnose(table: dict, fit: StateSpaceFit, pairs, frs, *, kinds=KINDS) -> lis
 
     for u in model.inputs:
         sel = (lambda p, u=u: p.input == u)
-        if "time_delay" in kinds and model.delays.get(u) not in free_names:
-            a, ev = sp.linear(sp.signature(lambda w: -1j * w, sel))
-            if a > 0:
-                out.append(Candidate("time_delay", u, {"tau_s": a}, ev))
+        a, ev = sp.linear(sp.signature(lambda w: -1j * w, sel))
+        if "time_delay" in kinds and a > 0 and model.delays.get(u) not in free_names:
+            out.append(Candidate("time_delay", u, {"tau_s": a}, ev))
+        if "sensor_skew" in kinds and a < 0 and model.input_skews.get(u) not in free_names:
+            # a phase lead on every pair of one input: its measurement is logged late
+            out.append(Candidate("sensor_skew", u, {"tau_s": -a}, ev))
         if "actuator_lag" in kinds:
             grid = np.geomspace(lo / 2, 3 * hi, 60)
             evs = [sp.shape(sp.signature(lambda w, a=a: np.log(a / (1j * w + a)), sel)) for a in grid]
@@ -496,6 +501,15 @@ def augment_table(table: dict, candidate: Candidate) -> tuple[dict, list[str]]:
             start += float(cur)
         name = _param(t, f"tau_{where}", start)
         t.setdefault("delays", {})[where] = name
+        return t, [name]
+    if k == "sensor_skew" and where in t["inputs"]:
+        name = _param(t, f"skew_{where}", par["tau_s"])
+        t.setdefault("input_skews", {})[where] = name
+        delay = (t.get("delays") or {}).get(where)
+        if isinstance(delay, str) and delay in t["parameters"] and not t["parameters"][delay].get("fixed"):
+            # only the net delay tau - skew is identifiable: a delay the fit held at 0 stays there
+            if abs(float(t["parameters"][delay].get("value", 0.0))) <= 1e-6:
+                t["parameters"][delay] = {"value": 0.0, "fixed": True}
         return t, [name]
     if k == "sensor_skew":
         cur = (t.get("output_delays") or {}).get(where)

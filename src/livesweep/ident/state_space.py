@@ -45,6 +45,7 @@ MAX_DELTA_COST = 2.0
 
 _MATRICES = ("M", "F", "G", "H", "J")
 _TABLE_KEYS = {"states", "inputs", "outputs", "M", "F", "G", "H", "J", "constants", "parameters", "delays", "output_delays",
+               "input_skews",
                "bands"}
 _DB = 20.0 / math.log(10.0)
 _DEG = 180.0 / math.pi
@@ -134,6 +135,13 @@ class StateSpaceModel:
         ``tau_o`` late, ``exp(-s tau_o)`` on every pair of that output.
     output_delay_entries : tuple of CompiledEntry
         One per output (the number 0 when undelayed).
+    input_skews : dict of str -> str or None
+        Time skew of an input's *measurement* [s]: the logged input is ``tau_s`` late, so the
+        model sees it advanced, ``exp(+s tau_s)`` on every pair of that input (what a control
+        position sensor logged late looks like; the net input delay ``tau - tau_s`` may then
+        be negative).
+    input_skew_entries : tuple of CompiledEntry
+        One per input (the number 0 when not skewed).
     bands : dict of (str, str) -> (float, float)
         Per-pair fitting bands [rad/s] from the case (``"p/da" = [lo, hi]``); others follow
         coherence.
@@ -164,6 +172,8 @@ class StateSpaceModel:
     unset: tuple = ()
     output_delays: dict = field(default_factory=dict)
     output_delay_entries: tuple = ()
+    input_skews: dict = field(default_factory=dict)
+    input_skew_entries: tuple = ()
     _cache: dict = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self):
@@ -261,6 +271,7 @@ class StateSpaceModel:
 
         delays, dentries = _parse_delays(table, "delays", inputs, "input", constants, names, w)
         odelays, odentries = _parse_delays(table, "output_delays", outputs, "output", constants, names, w)
+        iskews, isentries = _parse_delays(table, "input_skews", inputs, "input", constants, names, w)
 
         bands = {}
         raw_b = table.get("bands", {}) or {}
@@ -282,7 +293,7 @@ class StateSpaceModel:
             for row in mats[key]:
                 for e in row:
                     used.update(e.parameters)
-        for e in (*dentries, *odentries):
+        for e in (*dentries, *odentries, *isentries):
             used.update(e.parameters)
         for name, fx in zip(names, fixed):
             if not fx and name not in used:
@@ -290,7 +301,7 @@ class StateSpaceModel:
 
         model = cls(states, inputs, outputs, mats["M"], mats["F"], mats["G"], mats["H"], mats["J"], constants,
                     tuple(names), _frozen(init), tuple(fixed), delays, tuple(dentries), bands, where, tuple(unset),
-                    odelays, tuple(odentries))
+                    odelays, tuple(odentries), iskews, tuple(isentries))
         model._check_at(model.initial, "the initial values")
         return model
 
@@ -302,7 +313,7 @@ class StateSpaceModel:
                     v = e.value(theta)
                     if not math.isfinite(v):
                         raise ConfigError(f"{e.where} = {e.text!r}: not finite at {what} ({v})")
-        for e in (*self.delay_entries, *self.output_delay_entries):
+        for e in (*self.delay_entries, *self.output_delay_entries, *self.input_skew_entries):
             v = e.value(theta)
             if not math.isfinite(v) or v < 0:
                 raise ConfigError(f"{e.where} = {e.text!r}: delay must be finite and >= 0 s at {what}, got {v}")
@@ -340,17 +351,17 @@ class StateSpaceModel:
             else:
                 nonlin.append(("tau", 0, j, e))
         base["tau"], coef["tau"] = tb[None, :], tc[:, None, :]
-        p = len(self.outputs)
-        entries = self.output_delay_entries or ()
-        ob, oc = np.zeros(p), np.zeros((P, p))
-        for j, e in enumerate(entries):
-            if e.affine is not None:
-                ob[j] = e.affine[0]
-                for k, v in e.affine[1]:
-                    oc[k, j] += v
-            else:
-                nonlin.append(("tau_y", 0, j, e))
-        base["tau_y"], coef["tau_y"] = ob[None, :], oc[:, None, :]
+        for key, entries, n in (("tau_y", self.output_delay_entries, len(self.outputs)),
+                                ("tau_s", self.input_skew_entries, len(self.inputs))):
+            ob, oc = np.zeros(n), np.zeros((P, n))
+            for j, e in enumerate(entries or ()):
+                if e.affine is not None:
+                    ob[j] = e.affine[0]
+                    for k, v in e.affine[1]:
+                        oc[k, j] += v
+                else:
+                    nonlin.append((key, 0, j, e))
+            base[key], coef[key] = ob[None, :], oc[:, None, :]
         return {"base": base, "coef": coef, "nonlin": nonlin}
 
     # --- parameters -----------------------------------------------------------------------
@@ -399,7 +410,7 @@ class StateSpaceModel:
     def delay_parameter_indices(self) -> tuple:
         """Indices of parameters that are (alone) an input's delay: bounded to >= 0 in fits."""
         out = []
-        for e in (*self.delay_entries, *self.output_delay_entries):
+        for e in (*self.delay_entries, *self.output_delay_entries, *self.input_skew_entries):
             if e.affine is not None and e.affine[0] == 0.0 and len(e.affine[1]) == 1 and e.affine[1][0][1] > 0:
                 out.append(e.affine[1][0][0])
         return tuple(sorted(set(out)))
@@ -424,25 +435,33 @@ class StateSpaceModel:
         c = self._cache
         out = {k: c["base"][k] + np.tensordot(th, c["coef"][k], axes=1) for k in (*_MATRICES, "tau")}
         for key, i, j, e in c["nonlin"]:
-            if key != "tau_y":
+            if key not in ("tau_y", "tau_s"):
                 out[key][i, j] = e.value(th)
         return out["M"], out["F"], out["G"], out["H"], out["J"], out["tau"][0]
 
-    def output_delays_s(self, theta) -> np.ndarray:
-        """Output (sensor skew) delays [s] at ``theta``, shape (n_outputs,)."""
+    def _extra_delays(self, theta, which: str) -> np.ndarray:
         th = np.asarray(theta, float)
         c = self._cache
-        out = c["base"]["tau_y"] + np.tensordot(th, c["coef"]["tau_y"], axes=1)
+        out = c["base"][which] + np.tensordot(th, c["coef"][which], axes=1)
         for key, i, j, e in c["nonlin"]:
-            if key == "tau_y":
+            if key == which:
                 out[i, j] = e.value(th)
         return out[0]
+
+    def output_delays_s(self, theta) -> np.ndarray:
+        """Output (sensor skew) delays [s] at ``theta``, shape (n_outputs,)."""
+        return self._extra_delays(theta, "tau_y")
+
+    def input_skews_s(self, theta) -> np.ndarray:
+        """Input measurement skews [s] at ``theta``, shape (n_inputs,): the net input delay of
+        the model is ``tau - input_skews_s``."""
+        return self._extra_delays(theta, "tau_s")
 
     def _derivatives(self, theta):
         """d(matrix)/d(theta_k) for every parameter k: dict of arrays (P, rows, cols)."""
         th = np.asarray(theta, float)
         c = self._cache
-        d = {k: c["coef"][k] for k in (*_MATRICES, "tau", "tau_y")}
+        d = {k: c["coef"][k] for k in (*_MATRICES, "tau", "tau_y", "tau_s")}
         if c["nonlin"]:
             d = {k: v.copy() for k, v in d.items()}
             for key, i, j, e in c["nonlin"]:
@@ -462,13 +481,15 @@ class StateSpaceModel:
         Returns
         -------
         ndarray, complex, shape (n_outputs, n_inputs, n_freq)
-            ``diag(exp(-jw tau_y)) [H (jw M - F)^-1 G + J] diag(exp(-jw tau))`` in output units per input unit
+            ``diag(exp(-jw tau_y)) [H (jw M - F)^-1 G + J] diag(exp(-jw (tau - tau_s)))`` in output
+            units per input unit (``tau_s``: input skews)
             (computed with linear solves, no inverse).
         """
         return self._response(theta, np.atleast_1d(np.asarray(omega, float)), jacobian=False)[0]
 
     def _response(self, theta, omega, jacobian: bool):
         M, F, G, H, J, tau = self.matrices(theta)
+        tau = tau - self.input_skews_s(theta)                 # net input delay
         tau_y = self.output_delays_s(theta)
         s = 1j * omega                                        # (f,)
         A = s[:, None, None] * M[None] - F[None]              # (f, n, n)
@@ -488,7 +509,7 @@ class StateSpaceModel:
         dMX = np.matmul(d["M"][:, None], X[None])
         inner = d["G"][:, None] + dFX - s[None, :, None, None] * dMX      # (k, f, n, m)
         dT0 = np.matmul(d["H"][:, None], X[None]) + np.matmul(Yl[None], inner) + d["J"][:, None]
-        dtau = d["tau"][:, 0, :]                                           # (k, m)
+        dtau = d["tau"][:, 0, :] - d["tau_s"][:, 0, :]                     # (k, m), net input delay
         dtau_y = d["tau_y"][:, 0, :]                                       # (k, p)
         dT = dT0 * E2[None] + T[None] * (-s[None, :, None, None] * (dtau[:, None, None, :] + dtau_y[:, None, :, None]))
         return np.moveaxis(T, 0, -1), np.moveaxis(dT, 1, -1)               # (p,m,f), (k,p,m,f)

@@ -329,7 +329,7 @@ def _delays(tau_s, m: int) -> np.ndarray:
 
 def verify(M, F, G, H, J, tau, t_s, u, y, *, output_names, output_units=None, weights=None, valid=None,
            x0: str = "zero", j_rms_max: float = J_RMS_MAX, tic_max: float = TIC_MAX,
-           output_delays=None) -> Verification:
+           output_delays=None, input_skews=None) -> Verification:
     """Verify a state-space model in the time domain (method.md §9; see the module docstring).
 
     Parameters
@@ -345,6 +345,10 @@ def verify(M, F, G, H, J, tau, t_s, u, y, *, output_names, output_units=None, we
     output_delays : array_like, shape (p,), optional
         Time skew of each output [s], >= 0: the model's output ``o`` is compared ``tau_o`` late
         (the sensor's sample is older than its stamp). Default none.
+    input_skews : array_like, shape (m,), optional
+        Time skew of each input's measurement [s], >= 0: the logged input is that late, so the
+        model is driven by it advanced (net shift ``tau - skew``; the last sample is held past the
+        end). Default none.
     t_s : array_like, shape (N,)
         Uniformly spaced sample times [s].
     u : array_like, shape (m, N)
@@ -386,6 +390,9 @@ def verify(M, F, G, H, J, tau, t_s, u, y, *, output_names, output_units=None, we
     H = _matrix(H, (p, n), "H")
     J = _matrix(J, (p, m), "J")
     tau = _delays(tau, m)
+    if input_skews is not None:
+        skews = _delays(input_skews, m)
+        tau = tau - skews                               # may be negative: an advance
     if u.shape[1] != N or y.shape[1] != N:
         raise ConfigError(f"verify: t_s has {N} samples but u has {u.shape[1]} and y {y.shape[1]}")
     if N < 3:

@@ -180,6 +180,7 @@ def run_verification_stage(case: Case, ss: StateSpaceStage, sample_rate_hz: floa
         valid = data.all_valid()
         u = np.where(np.isfinite(u), u, 0.0)
         v = verify(M, F, G, H, J, np.asarray(tau, float), data.t_s, u, y, output_names=list(outputs),
-                   output_units=units, valid=valid, output_delays=model.output_delays_s(theta))
+                   output_units=units, valid=valid, output_delays=model.output_delays_s(theta),
+                   input_skews=model.input_skews_s(theta))
         results.append((rec.label or rec.log.name, v))
     return VerificationStage(tuple(results), inputs, outputs)

@@ -88,9 +88,9 @@ def _verifier(case: Case, sample_rate_hz: float, inputs, outputs):
 
     def run(model, theta):
         M, F, G, H, J, tau = model.matrices(theta)
-        tau_y = model.output_delays_s(theta)
+        tau_y, skews = model.output_delays_s(theta), model.input_skews_s(theta)
         return [verify(M, F, G, H, J, np.asarray(tau, float), t, u, y, output_names=list(outputs), output_units=units,
-                       valid=valid, output_delays=tau_y) for t, u, y, valid in records]
+                       valid=valid, output_delays=tau_y, input_skews=skews) for t, u, y, valid in records]
 
     return run
 
