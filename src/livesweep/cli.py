@@ -318,6 +318,7 @@ def _monitor_settings(args):
         window_s=args.window or 120.0, update_period_s=args.update_period or 0.2,
         required_pairs=_required_pairs(args.require, spectral),
         saturation_limits=_saturation_limits(args.saturation, spectral),
+        references=tuple(spectral.references) if spectral.references else None,
     )
 
 

@@ -58,6 +58,10 @@ class MonitorSettings:
         Send an estimate to the Rerun view at most this often [s of data]: every estimate re-logs
         every pair's curves and waterfall (about 0.3 MB for 4 x 12 pairs), so the view refreshes
         at 1 Hz by default while the estimates themselves run at ``update_period_s``.
+    references : tuple of str, optional
+        One exogenous reference per input (a closed-loop test point's logged sweep injection): the
+        live responses and coherences are then formed through them (method.md §4.6), free of the
+        feedback bias; while a reference is silent the direct estimate is shown.
     """
 
     signals: dict
@@ -72,6 +76,7 @@ class MonitorSettings:
     saturation_limits: dict | None = None
     required_pairs: tuple | None = None
     view_period_s: float = 1.0
+    references: tuple | None = None
 
     def to_dict(self) -> dict:
         return {
@@ -80,6 +85,7 @@ class MonitorSettings:
             "sample_rate_hz": self.sample_rate_hz, "window_s": self.window_s, "segment_s": self.segment_s,
             "update_period_s": self.update_period_s,
             "required_pairs": None if self.required_pairs is None else [list(p) for p in self.required_pairs],
+            "references": None if not self.references else list(self.references),
         }
 
 
@@ -123,17 +129,18 @@ class MonitorPipeline:
     def __init__(self, settings: MonitorSettings, sources, *, recorder=None, view=None, publisher=None,
                  keep_estimates: bool = True):
         self.s = settings
-        for n in (*settings.inputs, *settings.outputs):
+        for n in (*settings.inputs, *settings.outputs, *(settings.references or ())):
             if n not in settings.signals:
                 raise ConfigError(f"signal {n!r} is not in the channel map ({', '.join(settings.signals)})")
         self.sources = list(sources)
         self.recorder, self.view, self.publisher = recorder, view, publisher
-        self.names = tuple(dict.fromkeys((*settings.inputs, *settings.outputs)))
+        self.names = tuple(dict.fromkeys((*settings.inputs, *settings.outputs, *(settings.references or ()))))
         self.aligner = GridAligner(settings.signals, self.names, settings.sample_rate_hz)
         kw = {} if settings.segment_s is None else {"segment_s": settings.segment_s}
         self.estimator = OnlineSpectralEstimator(self.names, settings.inputs, settings.outputs,
                                                  settings.sample_rate_hz, settings.band_rad_s,
-                                                 window_s=settings.window_s, **kw)
+                                                 window_s=settings.window_s, references=settings.references or (),
+                                                 **kw)
         self.excitation = ExcitationMonitor(settings.inputs, settings.outputs, settings.band_rad_s,
                                             settings.sample_rate_hz, saturation_limits=settings.saturation_limits,
                                             required_pairs=settings.required_pairs)
@@ -212,7 +219,7 @@ class MonitorPipeline:
         t = block.t0_s + np.arange(n) / fs
         if self.view is not None:
             self.view.log_timeseries(t, list(self.names), block.values,
-                                     ["input" if x in self.s.inputs else "output" for x in self.names])
+                                     ["output" if x in self.s.outputs else "input" for x in self.names])
         if self._next_tick is None:
             self._next_tick = block.t0_s + self.s.update_period_s
             self._t_first = block.t0_s

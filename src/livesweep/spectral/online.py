@@ -46,6 +46,7 @@ import numpy as np
 
 from livesweep.errors import ConfigError, require_number
 from livesweep.spectral.miso import condition_output, input_coherence_max
+from livesweep.spectral.reference import combine_legs
 from livesweep.spectral.response import FrequencyResponseSet
 from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW, random_error
 from livesweep.spectral.transform import segment_transforms, uniform_grid
@@ -117,6 +118,9 @@ class OnlineResult:
         Segments ending within the window that were dropped because they touched a missing sample.
     max_input_coherence : float
         Input cross-coherence above which a frequency is flagged ill-conditioned.
+    references : tuple of str
+        One exogenous reference per input (a closed-loop test point's logged sweep injection),
+        or empty; see :attr:`referenced`.
     """
 
     omega: np.ndarray
@@ -134,10 +138,14 @@ class OnlineResult:
     segment_starts: np.ndarray
     n_excluded: int = 0
     max_input_coherence: float = 0.5
+    references: tuple = ()
 
     def index(self, name: str) -> int:
         """Position of ``name`` on G's signal axes."""
         return self.names.index(name)
+
+    def _all_carry_power(self, names) -> bool:
+        return _carry_power(self.G, [self.index(n) for n in names])
 
     @property
     def omega_min_usable(self) -> float:
@@ -215,22 +223,56 @@ class OnlineResult:
         return FrequencyResponseSet(tuple(self.outputs), tuple(self.inputs), self.omega, H, pc, eps, True, mc, ill,
                                     {**self._settings(), "max_input_coherence": self.max_input_coherence})
 
+    @cached_property
+    def referenced(self) -> FrequencyResponseSet | None:
+        """Responses through the references, ``(y/r)(u/r)^-1`` (:mod:`livesweep.spectral.reference`),
+        from this window's spectral matrix; None without references. Each leg is conditioned on
+        all references (:func:`_condition`, singular-safe), with ``n_eff - q + 1`` degrees of freedom
+        for its random error."""
+        if not self.references:
+            return None
+        q = len(self.references)
+        idx_ref = [self.index(n) for n in self.references]
+        dof = self.n_eff - q + 1
+        legs, ill = {}, np.zeros(self.omega.size, bool)
+        for key, names in (("u", self.inputs), ("y", self.outputs)):
+            T = np.empty((len(names), q, self.omega.size), complex)
+            pc, eps = np.empty(T.shape), np.empty(T.shape)
+            mc = np.empty((len(names), self.omega.size))
+            for a, n in enumerate(names):
+                T[a], pc[a], mc[a], ill_a = _condition(self.G, idx_ref, self.index(n), self.max_input_coherence,
+                                                       self.n_segments)
+                eps[a] = random_error(pc[a], dof) if dof >= 1 else np.inf
+                ill |= ill_a
+            legs[key] = (T, pc, eps, mc)
+        (Tur, pcu, epsu, _), (Tyr, pcy, epsy, mcy) = legs["u"], legs["y"]
+        rr = combine_legs(Tur, pcu, epsu, Tyr, pcy, epsy, mcy, ill)
+        return FrequencyResponseSet(tuple(self.outputs), tuple(self.inputs), self.omega, rr.H, rr.coherence,
+                                    rr.random_error, True, rr.multiple_coherence, rr.ill_conditioned,
+                                    {**self._settings(), "references": list(self.references)})
+
     @property
     def best(self) -> FrequencyResponseSet:
-        """The conditioned set when there are several inputs and every one carries power, else the
+        """Through the references when there are references and every one carries power; else the
+        conditioned set when there are several inputs and every one carries power; else the
         ordinary set.
 
         During a single-axis sweep the other inputs may be exactly quiet: conditioning on a zero
         input is singular and would blank every pair, while the ordinary response of the swept
         input is then exact (nothing correlated to remove).
         """
-        if len(self.inputs) < 2:
-            return self.ordinary
-        auto = np.array([self.G[self.index(i), self.index(i)].real for i in self.inputs])
-        peak = float(np.max(auto)) if auto.size else 0.0
-        if peak <= 0 or np.any(np.median(auto, axis=-1) <= 1e-12 * peak):
+        if self.references and self._all_carry_power(self.references):
+            return self.referenced
+        if len(self.inputs) < 2 or not self._all_carry_power(self.inputs):
             return self.ordinary
         return self.conditioned
+
+
+def _carry_power(G, idx) -> bool:
+    """Every signal ``idx`` has power (median autospectrum above 1e-12 of the largest peak)."""
+    auto = np.array([G[i, i].real for i in idx])
+    peak = float(np.max(auto)) if auto.size else 0.0
+    return peak > 0 and not np.any(np.median(auto, axis=-1) <= 1e-12 * peak)
 
 
 def _condition(G, idx_in, out, max_input_coherence, n_segments):
@@ -304,14 +346,17 @@ class OnlineSpectralEstimator:
 
     def __init__(self, names, inputs, outputs, sample_rate_hz: float, band_rad_s, *, window_s: float = 60.0,
                  segment_s: float | None = None, overlap: float = 0.8, oversample: float = 2.0,
-                 max_input_coherence: float = 0.5, resync_every: int = 1000):
+                 max_input_coherence: float = 0.5, resync_every: int = 1000, references=()):
         self.names = tuple(str(n) for n in names)
         if len(set(self.names)) != len(self.names) or not self.names:
             raise ConfigError(f"signal names must be unique and non-empty, got {list(self.names)}")
         self.inputs, self.outputs = tuple(inputs), tuple(outputs)
         if not self.inputs or not self.outputs:
             raise ConfigError("the online estimator needs at least one input and one output")
-        for n in self.inputs + self.outputs:
+        self.references = tuple(references or ())
+        if self.references and len(self.references) != len(self.inputs):
+            raise ConfigError(f"one reference per input: {len(self.references)} references for {len(self.inputs)} inputs")
+        for n in self.inputs + self.outputs + self.references:
             if n not in self.names:
                 raise ConfigError(f"signal {n!r} is not among the streamed signals ({', '.join(self.names)})")
         self.sample_rate_hz = require_number(sample_rate_hz, "sample_rate_hz", positive=True)
@@ -500,5 +545,5 @@ class OnlineSpectralEstimator:
             n_eff=effective_averages(K, self.n, self.hop, self.taper), window_s=self.window_s,
             segment_s=self.segment_s, t_end_s=self.time_s, overlap=self.overlap,
             sample_rate_hz=self.sample_rate_hz, segment_starts=starts, n_excluded=len(self._excluded),
-            max_input_coherence=self.max_input_coherence,
+            max_input_coherence=self.max_input_coherence, references=self.references,
         )

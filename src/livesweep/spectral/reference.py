@@ -28,7 +28,7 @@ import numpy as np
 
 from livesweep.spectral.composite import composite_output_miso
 
-__all__ = ["ReferencedResponses", "reference_responses"]
+__all__ = ["ReferencedResponses", "reference_responses", "combine_legs"]
 
 
 @dataclass(frozen=True)
@@ -95,13 +95,34 @@ def reference_responses(windows, omega: np.ndarray, references: list[int], input
     for a, o in enumerate(outputs):
         Tyr[a], pc_y[a], mc[a], eps_y[a], ill_a = composite_output_miso(windows, omega, references, o, max_input_coherence)
         ill |= ill_a
+    return combine_legs(Tur, pc_u, eps_u, Tyr, pc_y, eps_y, mc, ill)
+
+
+def combine_legs(Tur, pc_u, eps_u, Tyr, pc_y, eps_y, multiple, ill) -> ReferencedResponses:
+    """``T_yu = T_yr T_ur^-1`` per frequency, with the coherence and error rules of the module
+    docstring (shared by the batch composite and the live sliding window).
+
+    Parameters
+    ----------
+    Tur, pc_u, eps_u : ndarray, shape (n_in, n_ref, n_freq)
+        Inputs over references: responses, partial coherences, random errors.
+    Tyr, pc_y, eps_y : ndarray, shape (n_out, n_ref, n_freq)
+        Outputs over references.
+    multiple : ndarray, shape (n_out, n_freq)
+        Multiple coherence of each output on the references.
+    ill : ndarray of bool, shape (n_freq,)
+        Frequencies already flagged (reference cross-coherence).
+    """
+    q = Tur.shape[1]
+    n = Tur.shape[-1]
+    n_out, n_in = Tyr.shape[0], Tur.shape[0]
     A = np.moveaxis(Tur, -1, 0)                       # (n, n_in, q)
     B = np.moveaxis(Tyr, -1, 0)                       # (n, n_out, q)
     finite = np.all(np.isfinite(A), axis=(1, 2)) & np.all(np.isfinite(B), axis=(1, 2))
     with np.errstate(all="ignore"):
         cond = np.where(finite, np.linalg.cond(np.where(finite[:, None, None], A, np.eye(q))), np.inf)
     ok = finite & (cond < 1e8)
-    H = np.full((len(outputs), len(inputs), n), np.nan + 0j)
+    H = np.full((n_out, n_in, n), np.nan + 0j)
     if np.any(ok):
         # T_yu A = B  <=>  A^T T_yu^T = B^T, solved per frequency.
         X = np.linalg.solve(np.swapaxes(A[ok], 1, 2), np.swapaxes(B[ok], 1, 2))   # (m, q=n_in, n_out)
@@ -110,4 +131,4 @@ def reference_responses(windows, omega: np.ndarray, references: list[int], input
     diag_eps_u = np.array([eps_u[b, b] for b in range(q)])
     coh = np.where(ok, pc_y * diag_pc_u[None, :, :], 0.0)
     eps = np.where(ok, np.sqrt(eps_y**2 + diag_eps_u[None, :, :] ** 2), np.inf)
-    return ReferencedResponses(H, coh, eps, np.where(ok, mc, 0.0), ill | ~ok, Tur)
+    return ReferencedResponses(H, coh, eps, np.where(ok, multiple, 0.0), ill | ~ok, Tur)
