@@ -20,7 +20,6 @@ import argparse
 import contextlib
 import hashlib
 import json
-import math
 import os
 import re
 import tempfile
@@ -31,7 +30,9 @@ import traceback
 from pathlib import Path
 
 from livesweep import __version__
+from livesweep.convert.common import sha256_of
 from livesweep.errors import ConfigError
+from livesweep.numbers import finite_or_none as _finite_or_none
 
 __all__ = ["find_cases", "fingerprint", "run_one", "run_batch", "summarize_report", "format_table",
            "add_batch_arguments", "cmd_batch", "BATCH_FILE", "LOG_FILE", "SUMMARY_JSON", "SUMMARY_TXT"]
@@ -156,19 +157,11 @@ def _assign_folders(cases: list[Path], out_dir: Path) -> list[str]:
     return folders  # type: ignore[return-value]
 
 
-def _file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def _log_hash(path: Path) -> tuple[int, str]:
     st = path.stat()
     key = (str(path), st.st_size, st.st_mtime_ns)
     if key not in _LOG_HASHES:
-        _LOG_HASHES[key] = _file_sha256(path)
+        _LOG_HASHES[key] = sha256_of(path)
     return st.st_size, _LOG_HASHES[key]
 
 
@@ -209,12 +202,6 @@ def fingerprint(case_path, stage: str = _DEFAULT_STAGE) -> str:
 # --------------------------------------------------------------------------------------------
 
 
-def _finite_or_none(x):
-    try:
-        x = float(x)
-    except (TypeError, ValueError):
-        return None
-    return x if math.isfinite(x) else None
 
 
 def summarize_report(report: dict) -> dict:

@@ -41,6 +41,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from livesweep.numbers import frozen_array as _frozen
+
 __all__ = ["Accuracy", "accuracy_from_jacobian", "MONTE_CARLO_SCATTER_OVER_CR", "MAX_CRAMER_RAO_PCT",
            "MAX_INSENSITIVITY_PCT", "MAX_CORRELATION"]
 
@@ -52,12 +54,6 @@ MONTE_CARLO_SCATTER_OVER_CR = 0.68
 MAX_CRAMER_RAO_PCT = 20.0
 MAX_INSENSITIVITY_PCT = 10.0
 MAX_CORRELATION = 0.9
-
-
-def _frozen(a):
-    a = np.array(a, dtype=float)
-    a.setflags(write=False)
-    return a
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,7 @@ from livesweep.errors import ConfigError
 from livesweep.ident.accuracy import (MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT, accuracy_from_jacobian)
 from livesweep.ident.cost import MIN_COHERENCE, N_OMEGA, W_G, W_P, fit_points, residuals, select_band
 from livesweep.ident.expression import compile_entry
+from livesweep.numbers import finite_or_none as _num, frozen_array as _frozen
 
 __all__ = ["StateSpaceModel", "FittedParameter", "StateSpaceFit", "select_pairs", "a_priori_eliminations",
            "fit_state_space", "reduce_structure", "equation_error_start", "MAX_DELTA_COST"]
@@ -49,12 +50,6 @@ _TABLE_KEYS = {"states", "inputs", "outputs", "M", "F", "G", "H", "J", "constant
                "bands"}
 _DB = 20.0 / math.log(10.0)
 _DEG = 180.0 / math.pi
-
-
-def _frozen(a, dtype=float):
-    arr = np.array(a, dtype=dtype)
-    arr.setflags(write=False)
-    return arr
 
 
 def _names(table, key, where, required=True):
@@ -655,11 +650,6 @@ class FittedParameter:
     cramer_rao_pct: float
     insensitivity: float
     insensitivity_pct: float
-
-
-def _num(x):
-    x = float(x)
-    return x if math.isfinite(x) else None
 
 
 @dataclass(frozen=True)

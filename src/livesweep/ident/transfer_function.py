@@ -46,6 +46,7 @@ from scipy.optimize import least_squares
 
 from livesweep.errors import ConfigError
 from livesweep.ident.cost import PairData, fit_points, residuals
+from livesweep.numbers import frozen_array
 from livesweep.spectral.response import FrequencyResponse
 
 __all__ = ["Factor", "Structure", "parse_structure", "TransferFunctionModel", "FittedTransferFunction",
@@ -279,9 +280,7 @@ def _jsonf(v):
 
 
 def _frozen(a):
-    arr = np.array(a)
-    arr.setflags(write=False)
-    return arr
+    return frozen_array(a, dtype=None)
 
 
 @dataclass(frozen=True)

@@ -60,9 +60,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from livesweep.lti import discretize_foh
-
 from livesweep.errors import ConfigError
+from livesweep.lti import discretize_foh
+from livesweep.numbers import finite_or_none as _num
 
 __all__ = ["J_RMS_MAX", "TIC_MAX", "OutputFit", "Verification", "verify", "simulate_response"]
 
@@ -209,11 +209,6 @@ class Verification:
             "n_unknowns": int(self.n_unknowns),
             "notes": list(self.notes),
         }
-
-
-def _num(x) -> float | None:
-    x = float(x)
-    return x if np.isfinite(x) else None
 
 
 # --------------------------------------------------------------------------------------------

@@ -8,10 +8,9 @@ import os
 import tempfile
 from pathlib import Path
 
-import numpy as np
-
 from livesweep import __version__
 from livesweep.errors import ConfigError
+from livesweep.numbers import finite_or_none
 from livesweep.report.plots import bode_plot
 
 __all__ = ["write_frequency_report", "prepare_out_dir", "save_response_set", "load_response_set",
@@ -151,8 +150,8 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
                               [o.units for o in v.outputs], list(residual.loop.fit.model.inputs), out / rel,
                               title=f"{case.name}: verification after the residual loop, {label}",
                               tic=[o.tic for o in v.outputs])
-            after.append({"label": label, "j_rms": _num_or_none(v.j_rms), "plot": rel,
-                          "tic": {o.name: _num_or_none(o.tic) for o in v.outputs}})
+            after.append({"label": label, "j_rms": finite_or_none(v.j_rms), "plot": rel,
+                          "tic": {o.name: finite_or_none(o.tic) for o in v.outputs}})
         report["residual_loop"]["verification_final"] = after
     if best.conditioned:
         report["frequency_responses_ordinary"] = [p.to_dict() for p in an.siso.pairs()]
@@ -166,11 +165,6 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
     _atomic_write(path, json.dumps(report, indent=1, allow_nan=False))
     _atomic_write(out / "report.html", _embed_images(_html(report), out))
     return path
-
-
-def _num_or_none(x):
-    x = float(x)
-    return x if np.isfinite(x) else None
 
 
 def _residual_section(case, loop, out: Path) -> dict:

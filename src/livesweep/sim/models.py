@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from livesweep.errors import ConfigError
+from livesweep.numbers import frozen_array as _frozen
 
 RAD2DEG = 180.0 / np.pi
 G_FT_S2 = 32.174
@@ -53,12 +54,6 @@ __all__ = [
     "MODELS",
     "get_model",
 ]
-
-
-def _frozen(a) -> np.ndarray:
-    arr = np.array(a, dtype=float)
-    arr.setflags(write=False)
-    return arr
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from livesweep.errors import ConfigError
+from livesweep.numbers import frozen_array as _frozen
 
 __all__ = ["FrequencyResponse", "FrequencyResponseSet", "broken_loop"]
 
@@ -38,12 +39,6 @@ def _phase_deg(H):
 def _json_list(x):
     """Floats for JSON: non-finite values become null."""
     return [float(v) if np.isfinite(v) else None for v in np.asarray(x, float)]
-
-
-def _frozen(a, dtype=None):
-    arr = np.array(a, dtype=dtype)
-    arr.setflags(write=False)
-    return arr
 
 
 @dataclass(frozen=True)
