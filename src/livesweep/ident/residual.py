@@ -41,13 +41,14 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from livesweep.errors import ConfigError
 from livesweep.ident.accuracy import MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT
 from livesweep.ident.state_space import StateSpaceFit, StateSpaceModel, fit_state_space
+from livesweep.numbers import finite_or_none
 
 __all__ = ["KINDS", "MIN_EVIDENCE", "MIN_RELATIVE_COST_DROP", "PairResidual", "Candidate", "LoopStep",
            "ResidualLoop", "pair_residuals", "diagnose", "augment_table", "run_residual_loop", "table_with_fit"]
@@ -179,9 +180,9 @@ class Candidate:
 class _Space:
     """Stacked, whitened residual space of the fitted pairs with the model's Jacobian projected out."""
 
-    def __init__(self, model, theta, pairs, frs):
+    def __init__(self, model, theta, pairs, frs, residuals=None):
         self.pairs = pairs
-        self.res = pair_residuals(model, theta, pairs, frs)
+        self.res = residuals if residuals is not None else pair_residuals(model, theta, pairs, frs)
         self.sig = np.concatenate([np.concatenate([r.sigma_db, r.sigma_deg]) for r in self.res])
         self.r = np.concatenate([np.concatenate([r.magnitude_db, r.phase_deg]) for r in self.res]) / self.sig
         self.model, self.theta = model, theta
@@ -299,7 +300,7 @@ def _dynamic_rows(table, params) -> list[int]:
     return rows
 
 
-def diagnose(table: dict, fit: StateSpaceFit, pairs, frs, *, kinds=KINDS) -> list[Candidate]:
+def diagnose(table: dict, fit: StateSpaceFit, pairs, frs, *, kinds=KINDS, residuals=None) -> list[Candidate]:
     """Rank the catalogue's effects by how much of the residual each explains (module docstring).
 
     Parameters
@@ -311,6 +312,8 @@ def diagnose(table: dict, fit: StateSpaceFit, pairs, frs, *, kinds=KINDS) -> lis
     frs : FrequencyResponseSet
     kinds : sequence of str
         Which kinds to consider.
+    residuals : list of PairResidual, optional
+        :func:`pair_residuals` of the fit when the caller has them already.
 
     Returns
     -------
@@ -318,7 +321,7 @@ def diagnose(table: dict, fit: StateSpaceFit, pairs, frs, *, kinds=KINDS) -> lis
         Best first; one per kind and location (its best grid point).
     """
     model, theta = fit.model, fit.theta
-    sp = _Space(model, theta, pairs, frs)
+    sp = _Space(model, theta, pairs, frs, residuals)
     lo, hi = _band_of(pairs)
     out: list[Candidate] = []
     free_names = {n for n, f in zip(model.parameters, model.fixed) if not f}
@@ -679,13 +682,13 @@ def _param_report(fit, names):
 
 
 def _finite(x):
-    x = float(x)
-    return round(x, 3) if math.isfinite(x) else None
+    return finite_or_none(x, 3)
 
 
-def _whitened_ss(model, theta, pairs, frs):
-    res = pair_residuals(model, theta, pairs, frs)
-    return float(sum(np.sum((r.magnitude_db / r.sigma_db) ** 2) + np.sum((r.phase_deg / r.sigma_deg) ** 2) for r in res))
+def _whitened_ss(residuals) -> float:
+    """Sum of squares of the whitened residual of every pair (noise units)."""
+    return float(sum(np.sum((r.magnitude_db / r.sigma_db) ** 2) + np.sum((r.phase_deg / r.sigma_deg) ** 2)
+                     for r in residuals))
 
 
 def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_steps: int = 3,
@@ -732,10 +735,10 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
     table = table_with_fit(table, fit)
     steps, unexplained, n_fits = [], [], 1
     ver = verify(fit.model, fit.theta) if verify else None
+    before = tuple(pair_residuals(fit.model, fit.theta, pairs, frs))
     for _ in range(max_steps + 1):
-        before = tuple(pair_residuals(fit.model, fit.theta, pairs, frs))
-        ss_before = _whitened_ss(fit.model, fit.theta, pairs, frs)
-        cands = diagnose(table, fit, pairs, frs, kinds=kinds)
+        ss_before = _whitened_ss(before)
+        cands = diagnose(table, fit, pairs, frs, kinds=kinds, residuals=before)
         strong = [c for c in cands if c.evidence >= min_evidence[c.kind]]
         tried, best = [], None
         if len(steps) < max_steps:
@@ -766,14 +769,12 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                                   _ver_summary(ver), _ver_summary(ver), before, before))
             unexplained += [{"kind": t["kind"], "where": t["where"], "reason": t["reason"]} for t in tried]
             break
-        rec, (table, fit, ver_after) = best
+        rec, (table, fit, ver_after, after) = best
         effect = {"kind": rec["kind"], "where": rec["where"], "parameters": rec["parameters"]}
-        after = tuple(pair_residuals(fit.model, fit.theta, pairs, frs))
         steps.append(LoopStep(tuple(cands), tuple(tried), effect, rec["cost_before"], rec["cost_after"],
                               _ver_summary(ver), _ver_summary(ver_after), before, after))
-        ver = ver_after
-    final_res = pair_residuals(fit.model, fit.theta, pairs, frs)
-    for r in final_res:
+        ver, before = ver_after, after
+    for r in before:                                  # the final fit's residual
         if r.rms_noise_units > 2.0:
             unexplained.append({"pair": f"{r.output}/{r.input}", "rms_noise_units": round(r.rms_noise_units, 2)})
     added = [s.effect for s in steps if s.effect is not None]
@@ -847,7 +848,8 @@ def _try(table, cand, fit, pairs, frs, verify, ss_before, ver_before, min_eviden
     except (ConfigError, np.linalg.LinAlgError, ValueError) as exc:
         rec.update(accepted=False, reason=f"could not re-identify: {exc}", cost_after=float("nan"), parameters=[])
         return rec, None
-    ss_after = _whitened_ss(new_fit.model, new_fit.theta, pairs, frs)
+    res_after = tuple(pair_residuals(new_fit.model, new_fit.theta, pairs, frs))
+    ss_after = _whitened_ss(res_after)
     params = _param_report(new_fit, new)
     ver_after = verify(new_fit.model, new_fit.theta) if verify else None
     change = _verification_change(ver_before, ver_after)
@@ -873,4 +875,4 @@ def _try(table, cand, fit, pairs, frs, verify, ss_before, ver_before, min_eviden
                            f"noise (mean squared-error change {change['mean_change']:.3g} > 2 x {change['noise']:.3g})")
     rec["accepted"] = not reasons
     rec["reason"] = "; ".join(reasons) if reasons else "accepted"
-    return rec, (table_with_fit(aug, new_fit), new_fit, ver_after)
+    return rec, (table_with_fit(aug, new_fit), new_fit, ver_after, res_after)
