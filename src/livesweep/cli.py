@@ -249,7 +249,7 @@ def cmd_identify(args) -> int:
         ver = run_verification_stage(case, ss, case.spectral.sample_rate_hz)
     if last >= 4 and ss is not None:
         progress("residual loop: diagnosing what the model lacks")
-        res = run_residual_stage(case, best, ss, progress=progress)
+        res = run_residual_stage(case, best, ss, runner=ver.runner if ver else None, progress=progress)
     progress("writing the report")
     path = write_frequency_report(stage, args.out, transfer_functions=tf, state_space=ss, verification=ver,
                                   residual=res)

@@ -159,28 +159,47 @@ class VerificationStage:
     results: tuple       # (label, Verification)
     inputs: tuple
     outputs: tuple
+    runner: object = None   # the VerificationRunner the results came from (records already loaded)
+
+
+class VerificationRunner:
+    """The case's verification records, loaded once, and a model driven open loop over them.
+
+    Parameters
+    ----------
+    case : Case
+    sample_rate_hz : float
+    inputs, outputs : sequence of str
+        The model's inputs and outputs (signal names of the case).
+    """
+
+    def __init__(self, case: Case, sample_rate_hz: float, inputs, outputs):
+        from livesweep.pipeline.frequency_response import load_record
+
+        self.inputs, self.outputs = tuple(inputs), tuple(outputs)
+        self.units = [case.signals[o].units if o in case.signals else "" for o in self.outputs]
+        self.records = []
+        for rec in case.verify:
+            data = load_record(case, (rec,), [*self.inputs, *self.outputs], sample_rate_hz)
+            u = np.vstack([data.signal(n) for n in self.inputs])
+            self.records.append((rec.label or rec.log.name, data.t_s, np.where(np.isfinite(u), u, 0.0),
+                                 np.vstack([data.signal(n) for n in self.outputs]), data.all_valid()))
+
+    def __call__(self, model, theta) -> list:
+        """``[(label, Verification)]`` of ``model`` at ``theta`` on every record."""
+        from livesweep.ident.verify import verify
+
+        M, F, G, H, J, tau = model.matrices(theta)
+        tau_y, skews = model.output_delays_s(theta), model.input_skews_s(theta)
+        return [(label, verify(M, F, G, H, J, np.asarray(tau, float), t, u, y, output_names=list(self.outputs),
+                               output_units=self.units, valid=valid, output_delays=tau_y, input_skews=skews))
+                for label, t, u, y, valid in self.records]
 
 
 def run_verification_stage(case: Case, ss: StateSpaceStage, sample_rate_hz: float) -> VerificationStage | None:
     """Drive the identified model open loop with each verification record's measured inputs."""
-    from livesweep.ident.verify import verify
-    from livesweep.pipeline.frequency_response import load_record
-
     if not case.verify or ss is None:
         return None
-    model, theta = ss.fit.model, ss.fit.theta
-    M, F, G, H, J, tau = model.matrices(theta)
-    inputs, outputs = tuple(model.inputs), tuple(model.outputs)
-    units = [case.signals[o].units if o in case.signals else "" for o in outputs]
-    results = []
-    for rec in case.verify:
-        data = load_record(case, (rec,), [*inputs, *outputs], sample_rate_hz)
-        u = np.vstack([data.signal(n) for n in inputs])
-        y = np.vstack([data.signal(n) for n in outputs])
-        valid = data.all_valid()
-        u = np.where(np.isfinite(u), u, 0.0)
-        v = verify(M, F, G, H, J, np.asarray(tau, float), data.t_s, u, y, output_names=list(outputs),
-                   output_units=units, valid=valid, output_delays=model.output_delays_s(theta),
-                   input_skews=model.input_skews_s(theta))
-        results.append((rec.label or rec.log.name, v))
-    return VerificationStage(tuple(results), inputs, outputs)
+    model = ss.fit.model
+    runner = VerificationRunner(case, sample_rate_hz, model.inputs, model.outputs)
+    return VerificationStage(tuple(runner(model, ss.fit.theta)), runner.inputs, runner.outputs, runner)

@@ -16,11 +16,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from livesweep.config import Case
 from livesweep.errors import ConfigError
 from livesweep.ident.residual import KINDS, MIN_EVIDENCE, ResidualLoop, run_residual_loop
+from livesweep.pipeline.parametric import VerificationRunner
 from livesweep.spectral.response import FrequencyResponseSet
 
 __all__ = ["ResidualStage", "residual_settings", "run_residual_stage"]
@@ -71,43 +70,27 @@ def residual_settings(case: Case) -> dict:
             "min_evidence": {**MIN_EVIDENCE, **{k: float(v) for k, v in me.items()}}}
 
 
-def _verifier(case: Case, sample_rate_hz: float, inputs, outputs):
-    """A ``verify(model, theta)`` over the case's verification records (loaded once), or None."""
-    from livesweep.ident.verify import verify
-    from livesweep.pipeline.frequency_response import load_record
+def run_residual_stage(case: Case, frs: FrequencyResponseSet, ss, *, runner=None,
+                       progress=None) -> ResidualStage | None:
+    """Run the loop on the state-space stage's result; None when there is nothing to run it on.
 
-    if not case.verify:
-        return None
-    units = [case.signals[o].units if o in case.signals else "" for o in outputs]
-    records = []
-    for rec in case.verify:
-        data = load_record(case, (rec,), [*inputs, *outputs], sample_rate_hz)
-        u = np.vstack([data.signal(n) for n in inputs])
-        records.append((data.t_s, np.where(np.isfinite(u), u, 0.0), np.vstack([data.signal(n) for n in outputs]),
-                        data.all_valid()))
-
-    def run(model, theta):
-        M, F, G, H, J, tau = model.matrices(theta)
-        tau_y, skews = model.output_delays_s(theta), model.input_skews_s(theta)
-        return [verify(M, F, G, H, J, np.asarray(tau, float), t, u, y, output_names=list(outputs), output_units=units,
-                       valid=valid, output_delays=tau_y, input_skews=skews) for t, u, y, valid in records]
-
-    return run
-
-
-def run_residual_stage(case: Case, frs: FrequencyResponseSet, ss, *, progress=None) -> ResidualStage | None:
-    """Run the loop on the state-space stage's result; None when there is nothing to run it on."""
+    ``runner``: the verification stage's :class:`~livesweep.pipeline.parametric.VerificationRunner`
+    (its records are already loaded); built here when not given and the case has ``[[verify]]``.
+    """
     if ss is None:
         return None
     settings = residual_settings(case)
     if not settings["enabled"]:
         return None
-    model = ss.fit.model
-    verify = _verifier(case, case.spectral.sample_rate_hz, tuple(model.inputs), tuple(model.outputs))
-    loop = run_residual_loop(case.tables["state_space"], ss.fit, frs, verify=verify, max_steps=settings["max_steps"],
-                             kinds=settings["kinds"], min_evidence=settings["min_evidence"], progress=progress)
-    after = ()
-    if verify is not None and loop.added:
-        labels = [rec.label or rec.log.name for rec in case.verify]
-        after = tuple(zip(labels, verify(loop.fit.model, loop.fit.theta)))
+    if runner is None and case.verify:
+        model = ss.fit.model
+        runner = VerificationRunner(case, case.spectral.sample_rate_hz, model.inputs, model.outputs)
+
+    def verify(model, theta):
+        return [v for _, v in runner(model, theta)]
+
+    loop = run_residual_loop(case.tables["state_space"], ss.fit, frs, verify=verify if runner else None,
+                             max_steps=settings["max_steps"], kinds=settings["kinds"],
+                             min_evidence=settings["min_evidence"], progress=progress)
+    after = tuple(runner(loop.fit.model, loop.fit.theta)) if runner is not None and loop.added else ()
     return ResidualStage(loop, settings, after)
