@@ -153,57 +153,50 @@ def test_exact_jacobian_against_central_differences(cruise):
     np.testing.assert_allclose(D, num, rtol=1e-5, atol=1e-6 * np.abs(num).max())
 
 
-def test_output_delay_is_a_pure_skew_on_that_outputs_pairs_with_an_exact_jacobian(cruise):
-    """A sensor time skew (``output_delays``): exp(-jw tau_p) on every p pair, nothing else."""
-    _, frs = cruise
+def _with_extra_delay(key, target, name, value):
+    """The cruise model and the same model with ``[state_space.<key>] <target> = <name>``."""
     base = StateSpaceModel.from_table(_table(CRUISE))
     table = _table(CRUISE)
-    table["output_delays"] = {"p": "tau_p"}
-    table["parameters"]["tau_p"] = {"value": 0.05}
-    m = StateSpaceModel.from_table(table)
-    w = np.geomspace(0.3, 20, 50)
-    T0 = base.frequency_response(base.initial, w)
-    T1 = m.frequency_response(m.initial, w)
-    expected = T0.copy()
-    expected[0] *= np.exp(-1j * w * 0.05)
-    np.testing.assert_allclose(T1, expected, rtol=1e-12, atol=0)
-    assert m.output_delays_s(m.initial).tolist() == [0.05, 0.0, 0.0, 0.0]
-    assert m.index("tau_p") in m.delay_parameter_indices()
-    pairs, _ = select_pairs(frs, m)
-    prob = _Problem(m, pairs)
-    k = m.index("tau_p")
-    r, D = prob.residuals_and_jacobian(m.initial, m.free)
-    tp, tm = m.initial.copy(), m.initial.copy()
-    tp[k] += 1e-6
-    tm[k] -= 1e-6
-    num = (prob.residuals(tp) - prob.residuals(tm)) / 2e-6
-    col = list(m.free).index(k)
-    np.testing.assert_allclose(D[:, col], num, rtol=1e-5, atol=1e-6 * np.abs(num).max())
+    table[key] = {target: name}
+    table["parameters"][name] = {"value": value}
+    return base, StateSpaceModel.from_table(table)
 
 
-def test_input_skew_advances_that_inputs_pairs_with_an_exact_jacobian(cruise):
-    """An input measured late (``input_skews``): exp(+jw tau_s) on every dr pair, so the net input
-    delay tau_r - tau_s may be negative."""
-    _, frs = cruise
-    base = StateSpaceModel.from_table(_table(CRUISE))
-    table = _table(CRUISE)
-    table["input_skews"] = {"dr": "skew_dr"}
-    table["parameters"]["skew_dr"] = {"value": 0.08}
-    m = StateSpaceModel.from_table(table)
-    w = np.geomspace(0.3, 20, 50)
-    expected = base.frequency_response(base.initial, w)
-    expected[:, 1] *= np.exp(+1j * w * 0.08)
-    np.testing.assert_allclose(m.frequency_response(m.initial, w), expected, rtol=1e-12, atol=0)
-    assert m.input_skews_s(m.initial).tolist() == [0.0, 0.08]
-    pairs, _ = select_pairs(frs, m)
-    prob = _Problem(m, pairs)
-    k = m.index("skew_dr")
+def _assert_jacobian_column_is_central_difference(m, frs, name):
+    prob = _Problem(m, select_pairs(frs, m)[0])
+    k = m.index(name)
     _, D = prob.residuals_and_jacobian(m.initial, m.free)
     tp, tm = m.initial.copy(), m.initial.copy()
     tp[k] += 1e-6
     tm[k] -= 1e-6
     num = (prob.residuals(tp) - prob.residuals(tm)) / 2e-6
     np.testing.assert_allclose(D[:, list(m.free).index(k)], num, rtol=1e-5, atol=1e-6 * np.abs(num).max())
+
+
+def test_output_delay_is_a_pure_skew_on_that_outputs_pairs_with_an_exact_jacobian(cruise):
+    """A sensor time skew (``output_delays``): exp(-jw tau_p) on every p pair, nothing else."""
+    _, frs = cruise
+    base, m = _with_extra_delay("output_delays", "p", "tau_p", 0.05)
+    w = np.geomspace(0.3, 20, 50)
+    expected = base.frequency_response(base.initial, w)
+    expected[0] *= np.exp(-1j * w * 0.05)
+    np.testing.assert_allclose(m.frequency_response(m.initial, w), expected, rtol=1e-12, atol=0)
+    assert m.output_delays_s(m.initial).tolist() == [0.05, 0.0, 0.0, 0.0]
+    assert m.index("tau_p") in m.delay_parameter_indices()
+    _assert_jacobian_column_is_central_difference(m, frs, "tau_p")
+
+
+def test_input_skew_advances_that_inputs_pairs_with_an_exact_jacobian(cruise):
+    """An input measured late (``input_skews``): exp(+jw tau_s) on every dr pair, so the net input
+    delay tau_r - tau_s may be negative."""
+    _, frs = cruise
+    base, m = _with_extra_delay("input_skews", "dr", "skew_dr", 0.08)
+    w = np.geomspace(0.3, 20, 50)
+    expected = base.frequency_response(base.initial, w)
+    expected[:, 1] *= np.exp(+1j * w * 0.08)
+    np.testing.assert_allclose(m.frequency_response(m.initial, w), expected, rtol=1e-12, atol=0)
+    assert m.input_skews_s(m.initial).tolist() == [0.0, 0.08]
+    _assert_jacobian_column_is_central_difference(m, frs, "skew_dr")
 
 
 # --- bad input ---------------------------------------------------------------------------------

@@ -10,17 +10,26 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from livesweep import __version__
-from livesweep.errors import LogFormatError
+from livesweep.errors import ConfigError, LogFormatError
 from livesweep.telemetry.mcap_log import McapLogWriter
 
-__all__ = ["ConversionResult", "ConversionWriter", "sniff_format", "sha256_of"]
+__all__ = ["ConversionResult", "ConversionWriter", "sniff_format", "sha256_of", "refuse_options"]
 
-_MCAP_MAGIC = b"\x89MCAP0\r\n"
-_ULOG_MAGIC = b"ULog\x01\x12\x35"
-_NUMPY_MAGIC = b"\x93NUMPY"
-_MATLAB_MAGIC = b"MATLAB 5.0 MAT-file"
-_PARQUET_MAGIC = b"PAR1"
-_DATAFLASH_HEAD = b"\xa3\x95\x80"          # HEAD1 HEAD2 FMT: every DataFlash / sdlog2 log starts with FMT
+#: (first bytes, format) for the formats with a signature at the start of the file
+_MAGIC = (
+    (b"\x89MCAP0\r\n", "mcap"),
+    (b"ULog\x01\x12\x35", "ulog"),
+    (b"\x93NUMPY", "numpy"),
+    (b"MATLAB 5.0 MAT-file", "matlab"),
+    (b"PAR1", "parquet"),
+    (b"\xa3\x95\x80", "dataflash"),         # HEAD1 HEAD2 FMT: every DataFlash / sdlog2 log starts with FMT
+)
+
+
+def refuse_options(src, what: str, options: dict, known: str) -> None:
+    """ConfigError naming the file when a converter is given options it does not take."""
+    if options:
+        raise ConfigError(f"{src}: option(s) {', '.join(sorted(options))} do not apply to {what} (it takes {known})")
 
 
 def sha256_of(path: Path) -> str:
@@ -62,18 +71,9 @@ def sniff_format(path) -> str:
         head = f.read(1 << 16)
     if not head:
         raise LogFormatError(f"{path}: the file is empty")
-    if head.startswith(_MCAP_MAGIC):
-        return "mcap"
-    if head.startswith(_ULOG_MAGIC):
-        return "ulog"
-    if head.startswith(_NUMPY_MAGIC):
-        return "numpy"
-    if head.startswith(_MATLAB_MAGIC):
-        return "matlab"
-    if head.startswith(_PARQUET_MAGIC):
-        return "parquet"
-    if head.startswith(_DATAFLASH_HEAD):
-        return "dataflash"
+    for magic, fmt in _MAGIC:
+        if head.startswith(magic):
+            return fmt
     if _plausible_tlog(head):
         return "tlog"
     sample = head[:4096]

@@ -78,8 +78,8 @@ from pathlib import Path
 
 import numpy as np
 
-from livesweep.convert.common import ConversionResult, ConversionWriter
-from livesweep.errors import ConfigError, LogFormatError
+from livesweep.convert.common import ConversionResult, ConversionWriter, refuse_options
+from livesweep.errors import LogFormatError
 
 __all__ = ["convert_dataflash"]
 
@@ -493,9 +493,7 @@ def convert_dataflash(src, out, *, gps_time: bool = True, **options) -> Conversi
         An option this converter does not take.
     """
     src, out = Path(src), Path(out)
-    if options:
-        raise ConfigError(f"{src}: option(s) {', '.join(sorted(options))} do not apply to a DataFlash log "
-                          "(convert_dataflash takes gps_time only)")
+    refuse_options(src, "a DataFlash log", options, "gps_time only")
     try:
         data = src.read_bytes()
     except OSError as e:

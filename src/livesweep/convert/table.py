@@ -58,7 +58,7 @@ from pathlib import Path
 
 import numpy as np
 
-from livesweep.convert.common import ConversionResult, ConversionWriter, sniff_format
+from livesweep.convert.common import ConversionResult, ConversionWriter, refuse_options, sniff_format
 from livesweep.errors import ConfigError, LogFormatError
 
 __all__ = ["convert_table", "load_column_map", "ColumnMap", "ColumnSpec", "read_table"]
@@ -480,8 +480,7 @@ def convert_table(src: Path, out: Path, column_map=None, **options) -> Conversio
         A file that is not a 2-D numeric table, ragged text rows or a non-numeric cell (naming the
         line), no data, times that cannot be placed.
     """
-    if options:
-        raise ConfigError(f"convert_table: unknown option(s) {', '.join(sorted(options))}; known: column_map")
+    refuse_options(src, "a table", options, "column_map only")
     src, out = Path(src), Path(out)
     cmap = load_column_map(column_map)
     fmt = sniff_format(src)

@@ -33,8 +33,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from livesweep.convert.common import ConversionResult, ConversionWriter
-from livesweep.errors import ConfigError
+from livesweep.convert.common import ConversionResult, ConversionWriter, refuse_options
 from livesweep.telemetry.mavlink_in import TlogSource
 from livesweep.telemetry.recorder import _schema_for  # the recorder's topic -> schema rule, shared on purpose
 
@@ -87,9 +86,7 @@ def convert_tlog(src, out, *, signing_key: bytes | None = None, **options) -> Co
         An option this converter does not take (e.g. ``column_map``), or a bad signing key.
     """
     src, out = Path(src), Path(out)
-    if options:
-        raise ConfigError(f"{src}: option(s) {', '.join(sorted(options))} do not apply to a MAVLink tlog "
-                          "(convert_tlog takes signing_key only)")
+    refuse_options(src, "a MAVLink tlog", options, "signing_key only")
     markers = {_MARKER_V1: 0, _MARKER_V2: 0}
     with TlogSource(src, signing_key=signing_key) as source:      # LogFormatError naming the file
         # Count MAVLink 1/2 frames as they are decoded (TlogSource's frames do not say which):

@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from livesweep.convert.common import ConversionResult, ConversionWriter
+from livesweep.convert.common import ConversionResult, ConversionWriter, refuse_options
 from livesweep.errors import ConfigError, LogFormatError
 
 __all__ = ["convert_ulog", "ulog_topic_name"]
@@ -176,8 +176,7 @@ def convert_ulog(src: Path, out: Path, *, topics=None, **options) -> ConversionR
     LogFormatError
         pyulog cannot read the file at all (bad header or definitions), naming the file.
     """
-    if options:
-        raise ConfigError(f"convert_ulog: unknown option(s) {', '.join(sorted(options))}; known: topics")
+    refuse_options(src, "a ULog", options, "topics only")
     ULog = _import_pyulog()
     src, out = Path(src), Path(out)
     if topics is not None:

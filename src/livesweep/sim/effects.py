@@ -142,6 +142,19 @@ class ActuatorSecondOrder(Effect):
         return A, np.array([[0.0], [w**2]]), np.array([[1.0, 0.0]]), np.array([[0.0]])
 
 
+def _resonance(omega_rad_s, w: float, z: float, gain: float, direct: float):
+    """``direct + gain 2 z w s/(s^2 + 2 z w s + w^2)``: the frequency response of a notch
+    (``gain`` < 0) or a resonance (``gain`` > 0) about ``w`` [rad/s]."""
+    s = 1j * np.asarray(omega_rad_s, dtype=float)
+    return direct + gain * 2 * z * w * s / (s**2 + 2 * z * w * s + w**2)
+
+
+def _resonance_ss(w: float, z: float, gain: float, direct: float):
+    """(A, B, C, D) of :func:`_resonance`."""
+    A = np.array([[0.0, 1.0], [-(w**2), -2 * z * w]])
+    return A, np.array([[0.0], [1.0]]), np.array([[0.0, gain * 2 * z * w]]), np.array([[direct]])
+
+
 @dataclass(frozen=True)
 class NotchFilter(Effect):
     """Notch (or, with ``depth`` < 0, resonant) filter in a control path:
@@ -165,14 +178,10 @@ class NotchFilter(Effect):
             raise ConfigError(f"{self.kind}: depth must be a number in [-10, 1] other than 0, got {self.depth!r}")
 
     def frequency_response(self, omega_rad_s):
-        s = 1j * np.asarray(omega_rad_s, dtype=float)
-        w, z = self.omega_rad_s, self.zeta
-        return 1.0 - self.depth * 2 * z * w * s / (s**2 + 2 * z * w * s + w**2)
+        return _resonance(omega_rad_s, self.omega_rad_s, self.zeta, -self.depth, 1.0)
 
     def state_space(self):
-        w, z = self.omega_rad_s, self.zeta
-        A = np.array([[0.0, 1.0], [-(w**2), -2 * z * w]])
-        return A, np.array([[0.0], [1.0]]), np.array([[0.0, -self.depth * 2 * z * w]]), np.array([[1.0]])
+        return _resonance_ss(self.omega_rad_s, self.zeta, -self.depth, 1.0)
 
 
 @dataclass(frozen=True)
@@ -196,15 +205,11 @@ class StructuralMode(Effect):
         _num(self.kind, "gain", self.gain, positive=True, upper=100.0)
 
     def frequency_response(self, omega_rad_s):
-        s = 1j * np.asarray(omega_rad_s, dtype=float)
-        w, z = self.omega_rad_s, self.zeta
-        return 1.0 + self.gain * 2 * z * w * s / (s**2 + 2 * z * w * s + w**2)
+        return _resonance(omega_rad_s, self.omega_rad_s, self.zeta, self.gain, 1.0)
 
     def state_space(self):
         """(A, B, C, D) of the additive part ``gain 2 zeta w s/(s^2 + 2 zeta w s + w^2)``."""
-        w, z = self.omega_rad_s, self.zeta
-        A = np.array([[0.0, 1.0], [-(w**2), -2 * z * w]])
-        return A, np.array([[0.0], [1.0]]), np.array([[0.0, self.gain * 2 * z * w]]), np.array([[0.0]])
+        return _resonance_ss(self.omega_rad_s, self.zeta, self.gain, 0.0)
 
 
 @dataclass(frozen=True)
