@@ -36,6 +36,7 @@ __all__ = [
     "Case",
     "load_case",
     "load_channel_map",
+    "require_table",
     "CASE_KEYS",
     "RAW_TABLE_KEYS",
 ]
@@ -197,6 +198,17 @@ class _Ctx:
 def _type_name(value: Any) -> str:
     return {bool: "boolean", int: "integer", float: "float", str: "string",
             list: "array", dict: "table"}.get(type(value), type(value).__name__)
+
+
+def require_table(raw: Any, known, where: str) -> dict:
+    """``raw`` as a table whose keys are all in ``known``, for the model tables later stages parse
+    (``[transfer_functions.*]``, ``[residual]``); ConfigError naming ``where`` (file and table)."""
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{where}: must be a table, got {raw!r}")
+    unknown = sorted(set(raw) - set(known))
+    if unknown:
+        raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
+    return raw
 
 
 def _check_keys(ctx: _Ctx, table: Mapping[str, Any], known: tuple[str, ...], where: str) -> None:

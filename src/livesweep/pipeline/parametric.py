@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from livesweep.config import Case
+from livesweep.config import Case, require_table
 from livesweep.errors import ConfigError
 from livesweep.ident.cost import fit_points
 from livesweep.ident.transfer_function import TransferFunctionModel, fit_transfer_function
@@ -60,11 +60,7 @@ def handling_qualities(omega, H, *, coherence=None) -> dict:
 
 def _tf_table(case: Case, name: str, raw) -> dict:
     where = f"{case.path}: transfer_functions.{name}"
-    if not isinstance(raw, dict):
-        raise ConfigError(f"{where}: must be a table, got {raw!r}")
-    unknown = sorted(set(raw) - _TF_KEYS)
-    if unknown:
-        raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)}; known: {', '.join(sorted(_TF_KEYS))}")
+    require_table(raw, _TF_KEYS, where)
     for key in ("output", "input", "denominator"):
         if not isinstance(raw.get(key), str):
             raise ConfigError(f"{where}.{key}: required, a string, got {raw.get(key)!r}")

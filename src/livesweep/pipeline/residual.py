@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from livesweep.config import Case
+from livesweep.config import Case, require_table
 from livesweep.errors import ConfigError
 from livesweep.ident.residual import KINDS, MIN_EVIDENCE, ResidualLoop, run_residual_loop
 from livesweep.pipeline.parametric import VerificationRunner
@@ -39,13 +39,8 @@ class ResidualStage:
 
 def residual_settings(case: Case) -> dict:
     """Validated ``[residual]`` settings (defaults filled in); ConfigError naming file and key."""
-    raw = case.tables.get("residual") or {}
     where = f"{case.path}: [residual]"
-    if not isinstance(raw, dict):
-        raise ConfigError(f"{where} must be a table")
-    bad = sorted(set(raw) - _KEYS)
-    if bad:
-        raise ConfigError(f"{where}: unknown key(s) {', '.join(bad)}; known: {', '.join(sorted(_KEYS))}")
+    raw = require_table(case.tables.get("residual") or {}, _KEYS, where)
     enabled = raw.get("enabled", True)
     if not isinstance(enabled, bool):
         raise ConfigError(f"{where}.enabled = {enabled!r}: must be true or false")
