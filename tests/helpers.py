@@ -36,6 +36,39 @@ class Multisine:
         return self.amplitude * sum(np.sin(w * t + ph) for w, ph in zip(self.omegas, self.phases))
 
 
+def match_roots(actual, desired) -> tuple[np.ndarray, np.ndarray]:
+    """Pair two sets of complex roots (eigenvalues, poles, zeros) by nearest neighbour.
+
+    The pairing minimises the total distance ``sum |a_i - d_j|`` (``linear_sum_assignment``), so it
+    does not depend on the order either set comes in. Sorted order is no pairing:
+    ``np.sort_complex`` orders the two members of a conjugate pair by a last-bit difference in their
+    real parts, which BLAS kernels and CPUs do not reproduce.
+
+    Parameters
+    ----------
+    actual, desired : array_like of complex, same size
+        Roots [rad/s].
+
+    Returns
+    -------
+    actual, desired : ndarray of complex
+        ``actual`` in its own order and ``desired`` reordered to match it.
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    a = np.asarray(actual, complex).ravel()
+    d = np.asarray(desired, complex).ravel()
+    assert a.size == d.size, f"{a.size} roots, expected {d.size}: {a} vs {d}"
+    rows, cols = linear_sum_assignment(np.abs(a[:, None] - d[None, :]))
+    return a[rows], d[cols]
+
+
+def assert_roots_close(actual, desired, *, rtol: float = 1e-7, atol: float = 0.0):
+    """``assert_allclose`` of two sets of roots paired by :func:`match_roots` (tolerances as numpy's)."""
+    a, d = match_roots(actual, desired)
+    np.testing.assert_allclose(a, d, rtol=rtol, atol=atol, err_msg="roots paired by nearest neighbour")
+
+
 def db(x):
     return 20 * np.log10(np.abs(x))
 

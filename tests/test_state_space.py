@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import control
 
+from helpers import assert_roots_close
 from livesweep.config import load_case
 from livesweep.errors import ConfigError
 from livesweep.ident.accuracy import MONTE_CARLO_SCATTER_OVER_CR, accuracy_from_jacobian
@@ -101,7 +102,7 @@ def test_frequency_response_equals_the_simulator_model(path, truth):
     T = m.frequency_response(th, w)
     ref = truth.frequency_response(w)[[truth.outputs.index(o) for o in m.outputs]]
     np.testing.assert_allclose(T, ref, rtol=2e-5)       # H uses 57.2958 for 180/pi
-    np.testing.assert_allclose(m.eigenvalues(th), truth.eigenvalues(), rtol=2e-5)   # case U0 = 286.93 (sim 286.9277)
+    assert_roots_close(m.eigenvalues(th), truth.eigenvalues(), rtol=2e-5)   # case U0 = 286.93 (sim 286.9277)
 
 
 def test_implicit_M_and_nonlinear_entries_against_python_control():
@@ -126,7 +127,7 @@ def test_implicit_M_and_nonlinear_entries_against_python_control():
     w = np.geomspace(0.1, 30, 40)
     ref = control.ss(Mi @ F, Mi @ G, H, J)(1j * w) * np.exp(-1j * w * 0.05)
     np.testing.assert_allclose(m.frequency_response(th, w), ref, rtol=1e-9)
-    np.testing.assert_allclose(m.eigenvalues(th), np.sort_complex(np.linalg.eigvals(Mi @ F)), rtol=1e-10)
+    assert_roots_close(m.eigenvalues(th), np.linalg.eigvals(Mi @ F), rtol=1e-10)
 
 
 def test_exact_jacobian_against_central_differences(cruise):
@@ -299,7 +300,7 @@ def test_cruise_recovers_tables_2_1_and_2_2(cruise_fit):
     for q in fit.parameters:                                     # CR >= I always (method.md §8.4)
         assert q.cramer_rao >= q.insensitivity * (1 - 1e-9)
     # the identified modes are the truth's (Dutch roll, roll, spiral)
-    np.testing.assert_allclose(fit.eigenvalues, xv15_cruise().eigenvalues(), atol=0.08)
+    assert_roots_close(fit.eigenvalues, xv15_cruise().eigenvalues(), atol=0.08)
     assert elapsed < 5.0
 
 
@@ -397,7 +398,7 @@ def test_hover_sample_logs_recover_tables_2_3_and_2_4(hover, hover_fit):
     for name in ("Lp", "Lda", "Nr", "Ndr", "Lv", "Nv"):
         assert fit.parameter(name).cramer_rao_pct < 20, name
     # the identified modes are the truth's (unstable lateral oscillation, roll, yaw)
-    np.testing.assert_allclose(np.sort_complex(fit.eigenvalues), np.sort_complex(xv15_hover().eigenvalues()), atol=0.08)
+    assert_roots_close(fit.eigenvalues, xv15_hover().eigenvalues(), atol=0.08)
 
 
 def test_hover_structure_reduction_removes_the_true_zeros_and_keeps_the_real_ones(hover_fit):

@@ -15,6 +15,7 @@ import re
 import numpy as np
 import pytest
 
+from helpers import assert_roots_close
 from livesweep.errors import ConfigError
 from livesweep.ident.cost import fit_points, pair_cost
 from livesweep.ident.transfer_function import (FittedTransferFunction, TransferFunctionModel, fit_transfer_function,
@@ -127,9 +128,8 @@ def test_xv15_roll_rate_eq_2_9_is_recovered():
     for name, v in P_TRUTH.items():
         assert abs(f.parameters[name] - v) < 4 * k * f.cramer_rao[name], name
     # roots: the seed's fixture (method.md §11.1 [CALC])
-    np.testing.assert_allclose(np.sort_complex(f.poles), np.sort_complex([-0.0912, -1.0, -0.3958 + 1.6224j, -0.3958 - 1.6224j]),
-                               atol=0.05)
-    np.testing.assert_allclose(np.sort_complex(f.zeros), np.sort_complex([0, -0.5365 + 1.8539j, -0.5365 - 1.8539j]), atol=0.05)
+    assert_roots_close(f.poles, [-0.0912, -1.0, -0.3958 + 1.6224j, -0.3958 - 1.6224j], atol=0.05)
+    assert_roots_close(f.zeros, [0, -0.5365 + 1.8539j, -0.5365 - 1.8539j], atol=0.05)
     # the model's response is the one the cost saw
     assert pair_cost(pair, f.response(pair.omega)) == pytest.approx(f.cost, rel=1e-9)
     d = json.loads(json.dumps(f.to_dict()))
