@@ -21,13 +21,15 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from livesweep.errors import ConfigError
+from livesweep import limits
+from livesweep.errors import ConfigError, quote
 
 __all__ = [
     "SignalSpec",
@@ -52,6 +54,8 @@ _SIGNAL_KEYS = ("topic", "field", "stamp", "stamp_scale", "scale", "offset", "un
 _SPECTRAL_KEYS = ("inputs", "outputs", "band_rad_s", "sample_rate_hz", "windows_s", "overlap", "n_freq",
                   "references")
 _MAX_OVERLAP = 0.95
+#: A signal name: letters, digits, ``_``, and ``.``/``-`` inside (never ``..``); never a path.
+_SIGNAL_NAME = re.compile(r"[A-Za-z0-9_](?:[A-Za-z0-9_.\-]*[A-Za-z0-9_])?")
 
 
 # --------------------------------------------------------------------------------------------
@@ -191,7 +195,7 @@ class _Ctx:
         self.path = path
 
     def error(self, key: str, problem: str, value: Any = ...) -> ConfigError:
-        got = "" if value is ... else f", got {value!r}"
+        got = "" if value is ... else f", got {quote(value)}"
         return ConfigError(f"{self.path}: {key}: {problem}{got}")
 
 
@@ -302,10 +306,21 @@ def _parse_signals(ctx: _Ctx, raw: Any) -> dict[str, SignalSpec]:
         raise ctx.error("signals", "must define at least one signal ([signals.NAME] with topic and field)")
     out: dict[str, SignalSpec] = {}
     for name, spec in t.items():
-        if not name.strip():
-            raise ctx.error("signals", "a signal name must not be empty", name)
+        _check_signal_name(ctx, name)
         out[name] = _parse_signal(ctx, name, spec)
     return out
+
+
+def _check_signal_name(ctx: _Ctx, name: str) -> None:
+    """A signal name is a name, never a path: it becomes part of plot file names."""
+    if not name.strip():
+        raise ctx.error("signals", "a signal name must not be empty", name)
+    if len(name) > limits.MAX_NAME_CHARS:
+        raise ctx.error("signals", f"a signal name must be at most {limits.MAX_NAME_CHARS} characters "
+                        f"(this one has {len(name)})", name)
+    if not _SIGNAL_NAME.fullmatch(name) or ".." in name:
+        raise ctx.error(f"signals.{quote(name)}", "a signal name may hold only letters, digits, '_', and "
+                        "'.' or '-' between them (no '/', no '..', no spaces)", name)
 
 
 def _parse_spectral(ctx: _Ctx, raw: Any, signals: Mapping[str, SignalSpec]) -> SpectralSettings:
@@ -326,6 +341,9 @@ def _parse_spectral(ctx: _Ctx, raw: Any, signals: Mapping[str, SignalSpec]) -> S
             raise ctx.error(f"spectral.inputs[{i}]", "is also listed in spectral.outputs; "
                             "a signal is an input or an output, not both", n)
     fs = _positive(ctx, t["sample_rate_hz"], "spectral.sample_rate_hz")
+    if fs > limits.MAX_SAMPLE_RATE_HZ:
+        raise ctx.error("spectral.sample_rate_hz", f"must be at most {limits.MAX_SAMPLE_RATE_HZ:g} Hz",
+                        t["sample_rate_hz"])
     band = t["band_rad_s"]
     if not isinstance(band, list) or len(band) != 2:
         raise ctx.error("spectral.band_rad_s", "must be an array [lo, hi] of two numbers in rad/s", band)
@@ -344,13 +362,24 @@ def _parse_spectral(ctx: _Ctx, raw: Any, signals: Mapping[str, SignalSpec]) -> S
         w = t["windows_s"]
         if not isinstance(w, list) or not w:
             raise ctx.error("spectral.windows_s", "must be a non-empty array of window lengths in s", w)
+        if len(w) > limits.MAX_WINDOWS:
+            raise ctx.error("spectral.windows_s", f"holds {len(w)} window lengths; at most {limits.MAX_WINDOWS}", w)
         windows = tuple(_positive(ctx, v, f"spectral.windows_s[{i}]") for i, v in enumerate(w))
+        for i, v in enumerate(windows):
+            if v > limits.MAX_WINDOW_S:
+                raise ctx.error(f"spectral.windows_s[{i}]", f"must be at most {limits.MAX_WINDOW_S:g} s", w[i])
     overlap = _number(ctx, t.get("overlap", 0.8), "spectral.overlap")
     if not 0.0 <= overlap <= _MAX_OVERLAP:
         raise ctx.error("spectral.overlap", f"must be in [0, {_MAX_OVERLAP}]", t["overlap"])
     n_freq = t.get("n_freq", 150)
-    if isinstance(n_freq, bool) or not isinstance(n_freq, int) or n_freq < 2:
-        raise ctx.error("spectral.n_freq", "must be an integer >= 2", n_freq)
+    if isinstance(n_freq, bool) or not isinstance(n_freq, int) or not 2 <= n_freq <= limits.MAX_N_FREQ:
+        raise ctx.error("spectral.n_freq", f"must be an integer from 2 to {limits.MAX_N_FREQ}", n_freq)
+    n_windows = len(windows) if windows else limits.MAX_WINDOWS     # the stage chooses fewer
+    composite = len(outputs) * len(inputs) * n_freq * n_windows
+    if composite > limits.MAX_SPECTRAL_VALUES:
+        raise ctx.error("spectral.n_freq", f"{len(outputs)} outputs x {len(inputs)} inputs x {n_freq} frequencies x "
+                        f"{n_windows} windows = {composite} response values; at most {limits.MAX_SPECTRAL_VALUES}",
+                        n_freq)
     references = None
     if "references" in t:
         references = _string_list(ctx, t["references"], "spectral.references")
@@ -403,15 +432,22 @@ def _read_toml(path: str | os.PathLike[str]) -> tuple[_Ctx, dict[str, Any]]:
         what = "is a directory" if p.is_dir() else "does not exist"
         raise ConfigError(f"config file {p} {what}")
     try:
-        text = p.read_bytes().decode("utf-8")
-    except UnicodeDecodeError as e:
-        raise ConfigError(f"{p}: not UTF-8 text (byte {e.start}): TOML files must be UTF-8") from e
+        with open(p, "rb") as f:
+            raw = f.read(limits.MAX_CONFIG_BYTES + 1)
     except OSError as e:
         raise ConfigError(f"config file {p} cannot be read: {e.strerror or e}") from e
+    if len(raw) > limits.MAX_CONFIG_BYTES:
+        raise ConfigError(f"config file {p} is larger than {limits.MAX_CONFIG_BYTES} bytes; a case file is a few kB")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{p}: not UTF-8 text (byte {e.start}): TOML files must be UTF-8") from e
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{p}: TOML syntax error: {e}") from e
+    except RecursionError:
+        raise ConfigError(f"{p}: arrays or tables nested too deeply to read (TOML parser recursion limit)") from None
     return _Ctx(p), data
 
 
@@ -439,8 +475,11 @@ def load_case(path: str | os.PathLike[str]) -> Case:
         key, a non-finite number, ``start_s >= end_s``, a log that does not exist (the resolved
         path is named), spectral inputs/outputs that name no signal or are both, a band with
         ``lo <= 0``, ``lo >= hi`` or ``hi`` at or above Nyquist, ``overlap`` outside
-        ``[0, 0.95]``, non-positive ``windows_s`` or ``sample_rate_hz``. The message names the
-        file, the key path and the value.
+        ``[0, 0.95]``, non-positive ``windows_s`` or ``sample_rate_hz``, a signal name that is
+        not a plain name (letters, digits, ``_``, inner ``.``/``-``), a file too large or nested
+        too deeply to parse, and sizes beyond :mod:`livesweep.limits` (``sample_rate_hz``,
+        ``n_freq``, ``windows_s`` and the composite outputs x inputs x n_freq x windows). The
+        message names the file, the key path and the value.
     """
     ctx, data = _read_toml(path)
     _check_keys(ctx, data, CASE_KEYS, "")

@@ -1,5 +1,12 @@
 """Exceptions that the command line turns into one-line messages and exit code 2."""
 
+import reprlib
+
+_QUOTE = reprlib.Repr()
+_QUOTE.maxstring = _QUOTE.maxother = 120
+_QUOTE.maxlist = _QUOTE.maxtuple = _QUOTE.maxdict = _QUOTE.maxset = 8
+_QUOTE.maxlevel = 3
+
 
 class LivesweepError(Exception):
     """A user-facing error: bad input, bad configuration or an unusable path.
@@ -7,6 +14,12 @@ class LivesweepError(Exception):
     The message names what was wrong (file, key, value, channel or time) and is
     printed as one line by the CLI, without a traceback.
     """
+
+
+def quote(value) -> str:
+    """``repr(value)`` cut to a line's worth, for messages that quote a value from a file (a
+    crafted value can be megabytes long or nested thousands deep)."""
+    return _QUOTE.repr(value)
 
 
 class ConfigError(LivesweepError, ValueError):

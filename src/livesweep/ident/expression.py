@@ -22,6 +22,11 @@ exact gradient, by forward-mode differentiation of the tree.
 
 Every error is a :class:`~livesweep.errors.ConfigError` naming the entry, e.g.
 ``F[0][2] = 'Yr - U1': unknown name 'U1'``.
+
+Size: an entry holds at most :data:`~livesweep.limits.MAX_EXPRESSION_CHARS` characters,
+:data:`~livesweep.limits.MAX_EXPRESSION_TOKENS` tokens and
+:data:`~livesweep.limits.MAX_EXPRESSION_DEPTH` levels of parentheses and unary signs, so every
+tree walked here (recursively) stays far inside Python's recursion limit.
 """
 
 from __future__ import annotations
@@ -32,7 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from livesweep.errors import ConfigError
+from livesweep.errors import ConfigError, quote
+from livesweep.limits import MAX_EXPRESSION_CHARS, MAX_EXPRESSION_DEPTH, MAX_EXPRESSION_TOKENS
 
 __all__ = ["Node", "Num", "Name", "Neg", "BinOp", "parse", "names_in", "evaluate", "CompiledEntry",
            "compile_entry"]
@@ -103,13 +109,16 @@ def _tokenize(text: str, where: str):
         if m is None or m.end() == pos:
             bad = text[pos:].lstrip()[:1]
             col = len(text) - len(text[pos:].lstrip())
-            raise ConfigError(f"{where}{text!r}: unexpected character {bad!r} at position {col}")
+            raise ConfigError(f"{where}{quote(text)}: unexpected character {bad!r} at position {col}")
         kind = m.lastgroup
         tokens.append((kind, m.group(kind), m.start(kind)))
+        if len(tokens) > MAX_EXPRESSION_TOKENS:
+            raise ConfigError(f"{where}{quote(text)}: more than {MAX_EXPRESSION_TOKENS} numbers, names and operators; "
+                              "split the model (an entry is a few terms)")
         pos = m.end()
         # a number glued to a name ("2a", "1e3x") is not arithmetic
         if kind == "num" and pos < n and (text[pos].isalnum() or text[pos] in "_."):
-            raise ConfigError(f"{where}{text!r}: malformed number at position {m.start(kind)}")
+            raise ConfigError(f"{where}{quote(text)}: malformed number at position {m.start(kind)}")
     return tokens
 
 
@@ -118,9 +127,17 @@ class _Parser:
         self.text, self.where = text, where
         self.tokens = _tokenize(text, where)
         self.i = 0
+        self.depth = 0
+
+    def _enter(self, pos: int) -> None:
+        """One more level of parentheses or unary sign; bounded so the parser's recursion is."""
+        self.depth += 1
+        if self.depth > MAX_EXPRESSION_DEPTH:
+            raise self._error(f"nested more than {MAX_EXPRESSION_DEPTH} levels of parentheses and signs "
+                              f"(at position {pos})")
 
     def _error(self, msg: str):
-        return ConfigError(f"{self.where}{self.text!r}: {msg}")
+        return ConfigError(f"{self.where}{quote(self.text)}: {msg}")
 
     def _peek(self):
         return self.tokens[self.i] if self.i < len(self.tokens) else (None, None, len(self.text))
@@ -155,10 +172,12 @@ class _Parser:
                 return node
 
     def _unary(self) -> Node:
-        kind, val, _ = self._peek()
+        kind, val, pos = self._peek()
         if kind == "op" and val in "+-":
             self.i += 1
+            self._enter(pos)
             operand = self._unary()
+            self.depth -= 1
             return Neg(operand) if val == "-" else operand
         return self._atom()
 
@@ -168,15 +187,20 @@ class _Parser:
             raise self._error("unexpected end of expression")
         self.i += 1
         if kind == "num":
-            return Num(float(val))
+            value = float(val)
+            if not math.isfinite(value):
+                raise self._error(f"number {val} at position {pos} is beyond the float range")
+            return Num(value)
         if kind == "name":
             return Name(val)
         if val == "(":
+            self._enter(pos)
             node = self._sum()
             k2, v2, p2 = self._peek()
             if k2 != "op" or v2 != ")":
                 raise self._error(f"missing ')' for '(' at position {pos}")
             self.i += 1
+            self.depth -= 1
             return node
         raise self._error(f"unexpected {val!r} at position {pos}")
 
@@ -198,7 +222,8 @@ def parse(text, where: str = "") -> Node:
     Raises
     ------
     ConfigError
-        Empty text, a character that is not arithmetic, or a syntax error (naming the entry).
+        Empty text, a character that is not arithmetic, a syntax error, a number beyond the
+        float range, or an entry beyond the size limits of the module notes (naming the entry).
     """
     if isinstance(text, bool):
         raise ConfigError(f"{_where(where)}{text!r}: must be a number or an arithmetic expression, not a boolean")
@@ -207,7 +232,10 @@ def parse(text, where: str = "") -> Node:
             raise ConfigError(f"{_where(where)}{text!r}: must be finite")
         return Num(float(text))
     if not isinstance(text, str):
-        raise ConfigError(f"{_where(where)}{text!r}: must be a string or a number, not {type(text).__name__}")
+        raise ConfigError(f"{_where(where)}{quote(text)}: must be a string or a number, not {type(text).__name__}")
+    if len(text) > MAX_EXPRESSION_CHARS:
+        raise ConfigError(f"{_where(where)}{quote(text)}: {len(text)} characters; an entry holds at most "
+                          f"{MAX_EXPRESSION_CHARS}")
     return _Parser(text, _where(where)).parse()
 
 
@@ -257,7 +285,7 @@ def _resolve(node: Node, constants: dict, index: dict, text, where: str) -> Node
             return Num(float(constants[node.name]))
         if node.name in index:
             return _Param(index[node.name], node.name)
-        raise ConfigError(f"{_where(where)}{text!r}: unknown name {node.name!r} (not a parameter or constant)")
+        raise ConfigError(f"{_where(where)}{quote(text)}: unknown name {node.name!r} (not a parameter or constant)")
     if isinstance(node, Neg):
         inner = _resolve(node.operand, constants, index, text, where)
         return Num(-inner.value) if isinstance(inner, Num) else Neg(inner)
@@ -265,8 +293,12 @@ def _resolve(node: Node, constants: dict, index: dict, text, where: str) -> Node
     right = _resolve(node.right, constants, index, text, where)
     if isinstance(left, Num) and isinstance(right, Num):
         if node.op == "/" and right.value == 0.0:
-            raise ConfigError(f"{_where(where)}{text!r}: division by zero")
-        return Num(float(_apply(node.op, left.value, right.value)))
+            raise ConfigError(f"{_where(where)}{quote(text)}: division by zero")
+        value = float(_apply(node.op, left.value, right.value))
+        if not math.isfinite(value):
+            raise ConfigError(f"{_where(where)}{quote(text)}: the constant part {left.value!r} {node.op} "
+                              f"{right.value!r} overflows the float range")
+        return Num(value)
     return BinOp(node.op, left, right)
 
 

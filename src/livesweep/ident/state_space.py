@@ -32,10 +32,11 @@ import numpy as np
 import scipy.linalg
 from scipy.optimize import least_squares
 
-from livesweep.errors import ConfigError
+from livesweep.errors import ConfigError, quote
 from livesweep.ident.accuracy import (MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT, accuracy_from_jacobian)
 from livesweep.ident.cost import MIN_COHERENCE, N_OMEGA, W_G, W_P, fit_points, residuals, select_band
 from livesweep.ident.expression import compile_entry
+from livesweep.limits import MAX_MODEL_DIMENSION
 from livesweep.numbers import finite_or_none as _num, frozen_array as _frozen
 
 __all__ = ["StateSpaceModel", "FittedParameter", "StateSpaceFit", "select_pairs", "a_priori_eliminations",
@@ -59,10 +60,12 @@ def _names(table, key, where, required=True):
             raise ConfigError(f"{where}{key}: missing (a list of signal names)")
         return ()
     if not isinstance(raw, (list, tuple)) or not raw or not all(isinstance(n, str) and n for n in raw):
-        raise ConfigError(f"{where}{key} = {raw!r}: must be a non-empty list of names")
+        raise ConfigError(f"{where}{key} = {quote(raw)}: must be a non-empty list of names")
+    if len(raw) > MAX_MODEL_DIMENSION:
+        raise ConfigError(f"{where}{key}: {len(raw)} names; a model has at most {MAX_MODEL_DIMENSION}")
     dup = sorted({n for n in raw if list(raw).count(n) > 1})
     if dup:
-        raise ConfigError(f"{where}{key} = {raw!r}: repeated name(s) {', '.join(dup)}")
+        raise ConfigError(f"{where}{key} = {quote(raw)}: repeated name(s) {', '.join(dup)}")
     return tuple(raw)
 
 

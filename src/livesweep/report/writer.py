@@ -5,6 +5,7 @@ from __future__ import annotations
 import html
 import json
 import os
+import re
 import tempfile
 from pathlib import Path
 
@@ -56,6 +57,23 @@ def load_response_set(path):
     return FrequencyResponseSet.from_dict(d)
 
 
+_UNSAFE_FILE_CHARS = re.compile(r"[^A-Za-z0-9_.-]")
+
+
+def _plot_rel(stem: str, taken: set[str]) -> str:
+    """``plots/<stem>.png`` with ``stem`` made a plain file name (characters other than letters,
+    digits, ``_ . -`` become ``_``; no leading dot; at most 100 characters) and unique among
+    ``taken`` (``_2``, ``_3`` ... appended), whatever the signal names: a plot never lands
+    outside ``plots/`` nor overwrites another plot."""
+    safe = _UNSAFE_FILE_CHARS.sub("_", stem).lstrip(".")[:100] or "_"
+    name, k = safe, 1
+    while name in taken:
+        k += 1
+        name = f"{safe}_{k}"
+    taken.add(name)
+    return f"plots/{name}.png"
+
+
 def _atomic_write(path: Path, text: str) -> None:
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".partial")
     with os.fdopen(fd, "w") as f:
@@ -84,12 +102,12 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
     case, an = stage.case, stage.analysis
     best = an.best
     units = {n: s.units for n, s in case.signals.items()}
-    responses, plots = [], []
+    responses, plots, taken = [], [], set()
     tf_fits = list(transfer_functions.fits) if transfer_functions is not None else []
     ss_fit = state_space.fit if state_space is not None else None
     for pair in best.pairs():
         ordinary = an.siso.pair(pair.output, pair.input) if best.conditioned else None
-        rel = f"plots/{pair.output}_{pair.input}.png"
+        rel = _plot_rel(f"{pair.output}_{pair.input}", taken)
         models, band = [], None
         for f in tf_fits:
             if (f.output, f.input) == (pair.output, pair.input):
@@ -130,7 +148,7 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
 
         records = []
         for k, (label, v) in enumerate(verification.results):
-            rel = f"plots/verification_{k}.png"
+            rel = _plot_rel(f"verification_{k}", taken)
             time_history_plot(v.t_s, v.measured, v.predicted, v.inputs, [o.name for o in v.outputs],
                               [o.units for o in v.outputs], list(verification.inputs), out / rel,
                               title=f"{case.name}: verification, {label}", tic=[o.tic for o in v.outputs])
@@ -140,12 +158,12 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
                                   "records": records}
     if residual is not None:
         stages.append("residual-loop")
-        report["residual_loop"] = _residual_section(case, residual.loop, out)
+        report["residual_loop"] = _residual_section(case, residual.loop, out, taken)
         from livesweep.report.plots import time_history_plot
 
         after = []
         for k, (label, v) in enumerate(residual.verification_after):
-            rel = f"plots/residual_verification_{k}.png"
+            rel = _plot_rel(f"residual_verification_{k}", taken)
             time_history_plot(v.t_s, v.measured, v.predicted, v.inputs, [o.name for o in v.outputs],
                               [o.units for o in v.outputs], list(residual.loop.fit.model.inputs), out / rel,
                               title=f"{case.name}: verification after the residual loop, {label}",
@@ -167,13 +185,13 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
     return path
 
 
-def _residual_section(case, loop, out: Path) -> dict:
+def _residual_section(case, loop, out: Path, taken: set[str]) -> dict:
     from livesweep.report.case_file import write_augmented_case
     from livesweep.report.plots import residual_plot
 
     d = loop.to_dict()
     for k, (step, sd) in enumerate(zip(loop.steps, d["steps"])):
-        rel = f"plots/residual_step_{k + 1}.png"
+        rel = _plot_rel(f"residual_step_{k + 1}", taken)
         what = (f"added {step.effect['kind']} at {step.effect['where']}" if step.effect else "nothing added")
         residual_plot(step.residuals_before, step.residuals_after, out / rel,
                       title=f"{case.name}: residual loop step {k + 1} ({what})")

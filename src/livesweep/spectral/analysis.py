@@ -16,13 +16,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from livesweep.errors import ConfigError
+from livesweep.limits import MAX_SPECTRAL_VALUES, window_spectra_values
 from livesweep.spectral.composite import composite_output_miso, composite_pair
 from livesweep.spectral.miso import input_coherence_max
 from livesweep.spectral.composite import interpolate_window
 from livesweep.spectral.reference import reference_responses
 from livesweep.spectral.response import FrequencyResponseSet
 from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW, window_spectra
-from livesweep.spectral.windows import default_windows_s
+from livesweep.spectral.windows import (MIN_WINDOW_SAMPLES, default_windows_s, longest_window_samples,
+                                        window_samples)
 
 __all__ = ["SpectralAnalysis", "analyze", "check_settings"]
 
@@ -74,7 +76,6 @@ def check_settings(values: np.ndarray, names, sample_rate_hz: float, inputs, out
         raise ConfigError(f"band_rad_s = [{lo:g}, {hi:g}] must satisfy 0 < low < high")
     if hi >= nyq:
         raise ConfigError(f"band_rad_s upper end {hi:g} rad/s is at or above Nyquist ({nyq:.1f} rad/s at {sample_rate_hz:g} Hz)")
-    record_s = values.shape[1] / sample_rate_hz
     ok = np.ones(values.shape[1], bool) if valid is None else np.asarray(valid, bool)
     for k, n in enumerate(names):
         if n not in inputs and n not in outputs and n not in references:
@@ -84,21 +85,40 @@ def check_settings(values: np.ndarray, names, sample_rate_hz: float, inputs, out
             raise ConfigError(f"signal {n!r} has no valid samples")
         if np.nanstd(x) == 0:
             raise ConfigError(f"signal {n!r} is constant ({x[0]:g}): nothing to identify from")
+    n_samples = values.shape[1]
+    n_longest = longest_window_samples(n_samples)
+    t_longest = n_longest / sample_rate_hz
     if windows_s is None:
-        windows_s = default_windows_s(record_s, lo, hi, min_periods=MIN_PERIODS_PER_WINDOW)
+        windows_s = default_windows_s(n_samples, sample_rate_hz, lo, hi, min_periods=MIN_PERIODS_PER_WINDOW)
     windows_s = tuple(float(w) for w in windows_s)
     for w in windows_s:
-        if w > record_s / 2:
-            raise ConfigError(f"window {w:g} s is longer than half the record ({record_s / 2:.1f} s)")
-        if w * sample_rate_hz < 8:
-            raise ConfigError(f"window {w:g} s holds fewer than 8 samples at {sample_rate_hz:g} Hz")
+        n = window_samples(w, sample_rate_hz)
+        if n > n_longest:
+            raise ConfigError(f"window {w:g} s ({n} samples) is longer than half the record ({n_longest} of "
+                              f"{n_samples} samples, {t_longest:g} s at {sample_rate_hz:g} Hz)")
+        if n < MIN_WINDOW_SAMPLES:
+            raise ConfigError(f"window {w:g} s holds {n} samples at {sample_rate_hz:g} Hz, fewer than "
+                              f"{MIN_WINDOW_SAMPLES}")
     lowest = MIN_PERIODS_PER_WINDOW * 2 * math.pi / max(windows_s)
     if lowest > lo * (1 + 1e-9):
         raise ConfigError(
             f"band_rad_s starts at {lo:g} rad/s but the longest window ({max(windows_s):g} s) resolves only from "
             f"{lowest:.3g} rad/s ({MIN_PERIODS_PER_WINDOW:g} periods per window): raise the band's lower end or "
-            f"lengthen the windows (at most half the record, {record_s / 2:.1f} s)")
+            f"lengthen the windows (at most half the record, {t_longest:g} s)")
     return windows_s
+
+
+def _check_spectral_size(n_signals: int, n_samples: int, sample_rate_hz: float, windows_s, overlap: float,
+                         band_rad_s) -> None:
+    """ConfigError before any transform when one window length's spectra would exceed
+    :data:`~livesweep.limits.MAX_SPECTRAL_VALUES` complex values."""
+    for w in windows_s:
+        size = window_spectra_values(n_signals, n_samples, sample_rate_hz, w, overlap, band_rad_s)
+        if size > MAX_SPECTRAL_VALUES:
+            raise ConfigError(
+                f"windows_s: a {w:g} s window over band_rad_s [{band_rad_s[0]:g}, {band_rad_s[1]:g}] at {sample_rate_hz:g} "
+                f"Hz with overlap {overlap:g} for {n_signals} signals needs {size} spectral values, more than "
+                f"{MAX_SPECTRAL_VALUES}: narrow the band, shorten the windows or lower the overlap")
 
 
 def analyze(values: np.ndarray, names, sample_rate_hz: float, inputs, outputs, band_rad_s, *,
@@ -138,6 +158,7 @@ def analyze(values: np.ndarray, names, sample_rate_hz: float, inputs, outputs, b
     references = list(references or ())
     windows_s = check_settings(values, names, sample_rate_hz, inputs, outputs, band_rad_s, windows_s, valid, references)
     used = [n for n in names if n in inputs or n in outputs or n in references]
+    _check_spectral_size(len(used), values.shape[1], sample_rate_hz, windows_s, overlap, band_rad_s)
     rows = [names.index(n) for n in used]
     x = values[rows]
     windows, skipped = [], []
