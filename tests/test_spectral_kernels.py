@@ -2,13 +2,17 @@
 
 import numpy as np
 import pytest
+from hypothesis import assume, example, given, settings
+from hypothesis import strategies as st
 from scipy import signal as sps
 
 from livesweep.errors import ConfigError
+from livesweep.spectral.analysis import check_settings
 from livesweep.spectral.response import FrequencyResponse, FrequencyResponseSet, broken_loop
-from livesweep.spectral.spectra import coherence, random_error, spectral_matrix
+from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW, coherence, random_error, spectral_matrix
 from livesweep.spectral.transform import segment_transforms
-from livesweep.spectral.windows import default_windows_s, effective_averages, hann, plan_segments
+from livesweep.spectral.windows import (MIN_WINDOW_SAMPLES, default_windows_s, effective_averages, hann,
+                                        plan_segments, window_samples)
 
 
 def test_single_window_spectra_equal_scipy_csd_and_coherence():
@@ -88,11 +92,43 @@ def test_segment_plan_excludes_windows_touching_gaps():
 
 
 def test_default_windows_follow_the_method_and_refuse_short_records():
-    w = default_windows_s(400.0, 0.3, 20.0)
+    w = default_windows_s(20_000, 50.0, 0.3, 20.0)                # 400 s at 50 Hz
     assert len(w) == 5 and w[0] == pytest.approx(20 * 2 * np.pi / 20.0, rel=1e-3)
-    assert w[-1] == pytest.approx(200.0)                         # T_win,max = T_rec / 2
+    assert w[-1] == 200.0                                        # T_win,max = T_rec / 2
     with pytest.raises(ConfigError, match="needs windows of 62.8 s"):  # three periods of 0.3 rad/s
-        default_windows_s(60.0, 0.3, 20.0)
+        default_windows_s(3000, 50.0, 0.3, 20.0)
+    with pytest.raises(ConfigError, match="half the record is 7 samples"):
+        default_windows_s(15, 50.0, 140.0, 150.0)
+
+
+def test_default_windows_are_whole_samples_within_half_the_record():
+    """The SIDD record of the report: 22798 samples at 400 Hz (56.995 s). Rounding half of it to
+    the millisecond gave 28.498 s, which analyze refused (longer than 28.4975 s)."""
+    w = default_windows_s(22798, 400.0, 1.0, 70.0)
+    assert w[-1] == 11399 / 400.0
+    assert [window_samples(x, 400.0) / 400.0 for x in w] == list(w)
+    # a short record: the shortest window is held at 8 samples and equal counts merge
+    assert default_windows_s(20, 50.0, 100.0, 150.0) == (8 / 50.0, 9 / 50.0, 10 / 50.0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(fs=st.sampled_from([50.0, 200.0, 400.0, 1000.0]), n=st.integers(2 * MIN_WINDOW_SAMPLES, 600_000),
+       margin=st.floats(1.000001, 50.0), span=st.floats(0.01, 1000.0))
+@example(fs=400.0, n=22798, margin=1.5, span=60.0)        # the 56.995 s record analyze used to refuse
+def test_analyze_accepts_its_default_windows_for_any_record_length(fs, n, margin, span):
+    """Whatever the record length and rate, and whatever band half the record resolves
+    (``margin`` x the lowest frequency it can), analyze's settings check accepts the default
+    windows, and the longest is exactly half the record (rounded down to a sample)."""
+    half_s = (n // 2) / fs
+    lo = margin * MIN_PERIODS_PER_WINDOW * 2 * np.pi / half_s
+    hi = min(lo * (1 + span), 0.99 * np.pi * fs)
+    assume(lo < hi)
+    k = np.arange(n)
+    values = np.vstack([np.sin(0.1 * k), np.cos(0.37 * k)])
+    windows = default_windows_s(n, fs, lo, hi, min_periods=MIN_PERIODS_PER_WINDOW)
+    assert check_settings(values, ["u", "y"], fs, ["u"], ["y"], (lo, hi), None, None) == windows
+    assert window_samples(windows[-1], fs) == n // 2
+    assert all(window_samples(w, fs) >= MIN_WINDOW_SAMPLES for w in windows)
 
 
 def _analytic(omega, f):

@@ -13,7 +13,7 @@ import numpy as np
 
 from livesweep.errors import ConfigError
 from livesweep.spectral.transform import segment_transforms, uniform_grid
-from livesweep.spectral.windows import effective_averages, hann, plan_segments
+from livesweep.spectral.windows import effective_averages, hann, plan_segments, window_samples
 
 __all__ = ["WindowSpectra", "window_spectra", "spectral_matrix", "coherence", "debiased_coherence", "random_error"]
 
@@ -134,7 +134,7 @@ def window_spectra(values: np.ndarray, names, sample_rate_hz: float, window_s: f
     WindowSpectra
     """
     values = np.atleast_2d(np.asarray(values, float))
-    n = int(round(window_s * sample_rate_hz))
+    n = window_samples(window_s, sample_rate_hz)
     if n > values.shape[1]:
         raise ConfigError(
             f"window {window_s:g} s is longer than the record ({values.shape[1] / sample_rate_hz:.1f} s)"

@@ -14,7 +14,25 @@ import numpy as np
 
 from livesweep.errors import ConfigError
 
-__all__ = ["hann", "SegmentPlan", "plan_segments", "effective_averages", "default_windows_s"]
+__all__ = ["hann", "SegmentPlan", "plan_segments", "effective_averages", "MIN_WINDOW_SAMPLES", "window_samples",
+           "longest_window_samples", "default_windows_s"]
+
+#: Fewest samples a spectral window may hold.
+MIN_WINDOW_SAMPLES = 8
+
+
+def window_samples(window_s: float, sample_rate_hz: float) -> int:
+    """Samples in a window of ``window_s`` [s] at ``sample_rate_hz`` [Hz], ``round(window_s * fs)``.
+
+    The one conversion the settings check, the default windows and the spectra all use.
+    """
+    return int(round(window_s * sample_rate_hz))
+
+
+def longest_window_samples(n_samples: int) -> int:
+    """Longest window [samples] allowed in a record of ``n_samples``: half of it, rounded down
+    (so that several windows are averaged)."""
+    return int(n_samples) // 2
 
 
 def hann(n: int) -> np.ndarray:
@@ -123,27 +141,55 @@ def effective_averages(n_segments: int, n_per_window: int, hop: int, window: np.
     return K / (1.0 + 2.0 * total)
 
 
-def default_windows_s(record_s: float, omega_min_rad_s: float, omega_max_rad_s: float, n_windows: int = 5,
-                      min_periods: float = 3.0) -> tuple[float, ...]:
+def default_windows_s(n_samples: int, sample_rate_hz: float, omega_min_rad_s: float, omega_max_rad_s: float,
+                      n_windows: int = 5, min_periods: float = 3.0) -> tuple[float, ...]:
     """Window lengths for a record and band (method.md §4.4), geometrically spaced.
 
-    Shortest ``20 * 2 pi / omega_max`` (20 cycles of the highest frequency); longest
-    ``record_s / 2`` (several averages). Long windows matter: the windowing bias of a sweep's
+    Shortest ``20 * 2 pi / omega_max`` (20 cycles of the highest frequency), at most a quarter of
+    the longest and at least :data:`MIN_WINDOW_SAMPLES`; longest half the record (several
+    averages), :func:`longest_window_samples`. Long windows matter: the windowing bias of a sweep's
     response falls with window length (measured on the XV-15 roll response at 0.34 rad/s: phase
     error -6.8, -2.0, -0.6 deg for 44, 84 and 160 s windows).
+
+    Every length is a whole number of samples, ``k / sample_rate_hz`` with ``k`` the count
+    :func:`window_samples` gives back, so the defaults always pass the check they are made for.
+
+    Parameters
+    ----------
+    n_samples : int
+        Record length [samples].
+    sample_rate_hz : float
+    omega_min_rad_s, omega_max_rad_s : float
+        The band [rad/s].
+    n_windows : int
+        Window lengths wanted; fewer when a short record rounds two to the same sample count.
+    min_periods : float
+        Periods of ``omega_min`` the longest window must hold.
+
+    Returns
+    -------
+    tuple of float
+        Window lengths [s], ascending.
 
     Raises
     ------
     ConfigError
-        When half the record cannot hold ``min_periods`` periods of ``omega_min``.
+        When half the record cannot hold ``min_periods`` periods of ``omega_min``, or fewer than
+        :data:`MIN_WINDOW_SAMPLES` samples.
     """
+    n_max = longest_window_samples(n_samples)
+    t_max = n_max / sample_rate_hz
     needed = min_periods * 2.0 * math.pi / omega_min_rad_s
-    t_max = record_s / 2.0
     if t_max < needed:
         raise ConfigError(
             f"band_rad_s starts at {omega_min_rad_s:g} rad/s, which needs windows of {needed:.1f} s "
             f"({min_periods:g} periods); half the record is only {t_max:.1f} s: raise the band's lower end to at "
             f"least {min_periods * 2 * math.pi / t_max:.3g} rad/s or fly a longer record"
         )
+    if n_max < MIN_WINDOW_SAMPLES:
+        raise ConfigError(f"half the record is {n_max} samples; a spectral window needs at least "
+                          f"{MIN_WINDOW_SAMPLES}: fly a longer record")
     t_min = min(20.0 * 2.0 * math.pi / omega_max_rad_s, t_max / 4.0)
-    return tuple(float(x) for x in np.round(np.geomspace(t_min, t_max, n_windows), 3))
+    n_min = max(MIN_WINDOW_SAMPLES, window_samples(t_min, sample_rate_hz))
+    counts = np.unique(np.round(np.geomspace(n_min, n_max, n_windows)).astype(np.int64))
+    return tuple(float(k) / sample_rate_hz for k in counts)
