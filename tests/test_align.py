@@ -1,4 +1,5 @@
-"""The monitor's aligner: one clock (wrap, reboot), multi-rate alignment, gaps, order independence."""
+"""The monitor's aligner: one clock (wrap, reboot), multi-rate alignment, gaps, order independence,
+memory bounded whatever the stamps say."""
 
 from pathlib import Path
 
@@ -8,26 +9,12 @@ import pytest
 from livesweep.config import SignalSpec, load_case
 from livesweep.consistency.resample import resample_uniform
 from livesweep.errors import ConfigError
-from livesweep.telemetry.align import GridAligner, StampUnwrapper
+from livesweep.telemetry.align import GridAligner
 from livesweep.telemetry.frames import Frame
 from livesweep.telemetry.replay import McapReplaySource
 from livesweep.telemetry.signals import read_signals
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def test_unwrapper_handles_uint32_wrap_and_reboot():
-    u = StampUnwrapper(1e-6)
-    raw = (np.arange(0, 200) * 20_000 + 2**32 - 2_000_000) % 2**32      # wraps after 100 samples
-    t = np.array([u(int(r)) for r in raw])
-    np.testing.assert_allclose(np.diff(t), 0.02, atol=1e-9)
-    assert u.wraps == 1 and u.resets == 0
-    last = t[-1]
-    t_after = u(300_000)                  # reboot: the boot clock starts again (0.3 s)
-    assert u.resets == 1 and t_after == pytest.approx(last + 1.0)
-    assert u(320_000) == pytest.approx(last + 1.02)
-    assert u(310_000) == pytest.approx(last + 1.01)     # 10 ms reordering is not a reset
-    assert u.resets == 1
 
 
 def spec(field, topic="/t"):

@@ -3,17 +3,27 @@
 * **One clock.** Every signal is timed by its stamp field (vehicle time) when the channel map
   names one, else by the receive time; a map that mixes the two is refused (the clocks are not
   comparable).
-* **Wrap and reboot.** Raw stamps go through :class:`StampUnwrapper`: a backward step of more
-  than half the 32-bit range is a wrap (``time_usec`` of SERVO_OUTPUT_RAW wraps every 71.6 min)
-  and adds one period; any other backward step of more than ``max_reorder_s`` is a reset (reboot):
-  the clock is re-anchored ``reset_gap_s`` after the last sample, so no window spans the reset.
-  Both are counted.
+* **Stamps are checked before use.** Each (topic, stamp field) has its own
+  :class:`~livesweep.telemetry.clock.StampClock`: a stamp that does not follow the stream's
+  recent clock (a corrupt or forged frame, a value from another epoch) is dropped and counted
+  (``clock_rejected``); the clock re-anchors (a reboot, a switch to UNIX time) only after several
+  consecutive stamps agree, and then continues ``reset_gap_s`` after the last sample, so no window
+  spans the discontinuity (``resets``). uint32 MAVLink time fields are unwrapped (``wraps``);
+  other fields never are. Each stream's first few stamps establish its clock (``clock_warmup``).
+* **One vehicle per topic.** MAVLink frames carry ``sysid``: the aligner follows the first system
+  it sees on each topic and counts frames of any other system (``other_system``) without mixing
+  them in (the recording keeps them all).
 * **Multi-rate alignment.** Each signal keeps its recent samples; grid samples ``t0 + k/fs`` are
   emitted once every signal has reached them, by linear interpolation between the bracketing
   samples. Where the bracketing samples are further apart than ``max(max_interp_gap_s, 1.5 x the
   signal's median spacing)`` the grid sample is marked invalid (a gap: excluded, never
   interpolated across). A signal that stops while others go on for ``gap_timeout_s`` is marked
   invalid from its last sample on, so one dead channel does not stall the others.
+* **Bounded memory whatever the stamps say.** A block holds at most ``max_fill_s`` of grid (call
+  :meth:`GridAligner.pop_ready` until it returns None); of a stretch where no signal has a sample
+  (a jump of the clock) only the last ``max_fill_s`` is emitted, all of it invalid so the
+  estimator's window is flushed, and the rest is skipped (``samples_skipped``); samples waiting for
+  a signal that never arrived are kept for ``max_fill_s`` at most.
 
 Everything is driven by the frames' contents alone (never by wall-clock time), so replaying a
 recording through the same aligner reproduces the live blocks exactly.
@@ -28,53 +38,32 @@ import numpy as np
 
 from livesweep.config import SignalSpec
 from livesweep.errors import ConfigError
+from livesweep.telemetry.clock import StampClock
 from livesweep.telemetry.frames import Frame
 
-__all__ = ["StampUnwrapper", "AlignedBlock", "GridAligner"]
+__all__ = ["AlignedBlock", "GridAligner", "as_number"]
 
-WRAP_UNITS = 2**32
 _EPS_S = 1e-7   # stamps within 0.1 us of a grid time are on it (grid times carry float round-off)
 
 
-class StampUnwrapper:
-    """Continuous seconds from raw stamps that may wrap at 2^32 units or reset on a reboot.
+def as_number(raw) -> float | None:
+    """``raw`` as a finite float, or None (not a number, a bool, NaN, inf, or beyond float range)."""
+    if isinstance(raw, bool) or not isinstance(raw, (int, float)):
+        return None
+    try:
+        v = float(raw)
+    except OverflowError:          # an integer beyond float range (e.g. 400 digits)
+        return None
+    return v if math.isfinite(v) else None
 
-    Parameters
-    ----------
-    scale_s : float
-        Seconds per stamp unit (1e-6 for ``time_usec``).
-    max_reorder_s : float
-        Backward steps up to this are reordering (returned as they are), not resets.
-    reset_gap_s : float
-        After a reset the clock continues this long after the last sample.
-    """
 
-    def __init__(self, scale_s: float, max_reorder_s: float = 1.0, reset_gap_s: float = 1.0):
-        self.scale_s = float(scale_s)
-        self.max_reorder_s = max_reorder_s
-        self.reset_gap_s = reset_gap_s
-        self.offset_s = 0.0
-        self.last_raw: float | None = None
-        self.last_t = -math.inf
-        self.wraps = 0
-        self.resets = 0
+def _wrap_units(topic: str, field: str) -> int | None:
+    """2**32 for a uint32 MAVLink time field (it wraps), else None (DataFlash, Zenoh, uint64 fields)."""
+    if not topic.startswith("/mavlink/"):
+        return None
+    from livesweep.telemetry.mavlink_codec import stamp_wrap_units
 
-    def __call__(self, raw: float) -> float:
-        """Seconds on the continuous clock for stamp ``raw``."""
-        if self.last_raw is not None and raw < self.last_raw:
-            back = self.last_raw - raw
-            if back > WRAP_UNITS / 2 and self.last_raw < WRAP_UNITS * 1.01:
-                self.offset_s += WRAP_UNITS * self.scale_s
-                self.wraps += 1
-            elif back * self.scale_s > self.max_reorder_s:
-                self.offset_s = self.last_t + self.reset_gap_s - raw * self.scale_s
-                self.resets += 1
-            else:
-                return raw * self.scale_s + self.offset_s   # reordered sample: leave the anchor alone
-        t = raw * self.scale_s + self.offset_s
-        self.last_raw = raw
-        self.last_t = max(self.last_t, t)
-        return t
+    return stamp_wrap_units(topic.split("/", 2)[2], field)
 
 
 @dataclass(frozen=True)
@@ -119,10 +108,17 @@ class GridAligner:
         Longest source-sample spacing bridged by interpolation.
     gap_timeout_s : float
         How long the other signals may run ahead of a silent one before it is marked missing.
+    reset_gap_s : float
+        Gap left in the continuous clock when a stream's clock re-anchors [s].
+    max_fill_s : float
+        The longest stretch of grid emitted at once after a jump, and the longest a signal's
+        samples wait for the others [s]: bounds memory whatever the stamps say. The monitor sets
+        it to its sliding window, so everything older has left the window anyway.
     """
 
     def __init__(self, signals: dict[str, SignalSpec], names, sample_rate_hz: float, *,
-                 max_interp_gap_s: float = 0.1, gap_timeout_s: float = 0.5, reset_gap_s: float = 1.0):
+                 max_interp_gap_s: float = 0.1, gap_timeout_s: float = 0.5, reset_gap_s: float = 1.0,
+                 max_fill_s: float = 600.0):
         self.names = tuple(names)
         missing = [n for n in self.names if n not in signals]
         if missing:
@@ -136,60 +132,89 @@ class GridAligner:
         self.clock = "vehicle" if stamped else "receive"
         if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
             raise ConfigError(f"sample_rate_hz must be > 0, got {sample_rate_hz!r}")
+        if not (max_fill_s > 0 and math.isfinite(max_fill_s)):
+            raise ConfigError(f"max_fill_s must be > 0, got {max_fill_s!r}")
         self.fs = float(sample_rate_hz)
         self.max_interp_gap_s = max_interp_gap_s
         self.gap_timeout_s = gap_timeout_s
+        self.max_fill = max(int(math.ceil(max_fill_s * self.fs)), 1)
+        self.max_fill_s = float(max_fill_s)
         self.by_topic: dict[str, list[str]] = {}
         for n, s in self.specs.items():
             self.by_topic.setdefault(s.topic, []).append(n)
-        self.unwrappers: dict[tuple[str, str], StampUnwrapper] = {}
+        self.clocks: dict[tuple[str, str], StampClock] = {}
+        self.systems: dict[str, int] = {}            # topic -> the system id followed
         self.reset_gap_s = reset_gap_s
         self.ch = {n: _Channel() for n in self.names}
         self.t0: float | None = None
         self.next_k = 0
         self.counts = {"frames_used": 0, "samples": 0, "missing_field": 0, "not_a_number": 0, "late_dropped": 0,
-                       "reordered": 0, "wraps": 0, "resets": 0, "samples_emitted": 0, "samples_invalid": 0}
+                       "reordered": 0, "wraps": 0, "resets": 0, "clock_rejected": 0,
+                       "other_system": 0, "samples_emitted": 0, "samples_invalid": 0, "samples_skipped": 0,
+                       "samples_expired": 0}
 
     # -- input ------------------------------------------------------------------------------
-    def _time(self, topic: str, spec: SignalSpec, frame: Frame) -> float | None:
-        if spec.stamp is None:
-            return frame.receive_ns * 1e-9
-        raw = frame.data.get(spec.stamp)
-        if not isinstance(raw, (int, float)) or isinstance(raw, bool):
-            self.counts["missing_field"] += 1
-            return None
-        key = (topic, spec.stamp)
-        u = self.unwrappers.get(key)
-        if u is None:
-            u = self.unwrappers[key] = StampUnwrapper(spec.stamp_scale, reset_gap_s=self.reset_gap_s)
-        w, r = u.wraps, u.resets
-        t = u(raw)
-        self.counts["wraps"] += u.wraps - w
-        self.counts["resets"] += u.resets - r
-        return t
+    def _clock(self, topic: str, stamp: str, scale: float) -> StampClock:
+        key = (topic, stamp)
+        c = self.clocks.get(key)
+        if c is None:
+            c = self.clocks[key] = StampClock(scale, wrap_units=_wrap_units(topic, stamp),
+                                              reset_gap_s=self.reset_gap_s, establish=True)
+        return c
 
-    def push(self, frame: Frame) -> None:
-        """Take the samples a frame carries (frames of other topics are ignored)."""
-        names = self.by_topic.get(frame.topic)
-        if not names:
-            return
-        self.counts["frames_used"] += 1
-        times: dict[str | None, float | None] = {}
+    def _same_system(self, frame: Frame) -> bool:
+        sysid = frame.data.get("sysid")
+        if sysid is None:
+            return True
+        first = self.systems.setdefault(frame.topic, sysid)
+        if sysid == first:
+            return True
+        self.counts["other_system"] += 1
+        return False
+
+    def _values(self, names, frame: Frame) -> list[tuple[str, float]]:
+        """(name, value in signal units) of the signals ``frame`` carries; the rest counted."""
+        out = []
         for n in names:
             spec = self.specs[n]
-            if spec.stamp not in times:
-                times[spec.stamp] = self._time(frame.topic, spec, frame)
-            t = times[spec.stamp]
-            if t is None:
-                continue
             raw = frame.data.get(spec.field)
             if raw is None and spec.field not in frame.data:
                 self.counts["missing_field"] += 1
                 continue
-            if not isinstance(raw, (int, float)) or isinstance(raw, bool) or not math.isfinite(raw):
+            v = as_number(raw)
+            if v is None:
                 self.counts["not_a_number"] += 1
                 continue
-            self._add(n, t, spec.scale * raw + spec.offset)
+            out.append((n, spec.scale * v + spec.offset))
+        return out
+
+    def push(self, frame: Frame) -> None:
+        """Take the samples a frame carries (frames of other topics are ignored)."""
+        names = self.by_topic.get(frame.topic)
+        if not names or not isinstance(frame.data, dict) or not self._same_system(frame):
+            return
+        self.counts["frames_used"] += 1
+        by_stamp: dict[str | None, list[str]] = {}
+        for n in names:
+            by_stamp.setdefault(self.specs[n].stamp, []).append(n)
+        for stamp, group in by_stamp.items():
+            values = self._values(group, frame)
+            if stamp is None:
+                released = [(frame.receive_ns * 1e-9, values)]
+            else:
+                raw = frame.data.get(stamp)
+                if isinstance(raw, bool) or not isinstance(raw, (int, float)):
+                    self.counts["missing_field"] += 1
+                    continue
+                clock = self._clock(frame.topic, stamp, self.specs[group[0]].stamp_scale)
+                before = (clock.wraps, clock.resets, clock.rejected)
+                released = clock.feed(raw, frame.receive_ns * 1e-9, values)
+                for key, b, a in zip(("wraps", "resets", "clock_rejected"), before,
+                                     (clock.wraps, clock.resets, clock.rejected)):
+                    self.counts[key] += a - b
+            for t, vals in released:
+                for n, v in vals:
+                    self._add(n, t, v)
 
     def _add(self, name: str, t: float, v: float) -> None:
         c = self.ch[name]
@@ -210,10 +235,31 @@ class GridAligner:
         self.counts["samples"] += 1
 
     # -- output -----------------------------------------------------------------------------
+    def _expire(self, chans) -> None:
+        """While some signal has no sample yet, keep only the last ``max_fill_s`` of the others."""
+        for c in chans:
+            if c.t and c.t[-1] - c.t[0] > self.max_fill_s:
+                k = int(np.searchsorted(c.t, c.t[-1] - self.max_fill_s))
+                del c.t[:k]
+                del c.v[:k]
+                self.counts["samples_expired"] += k
+
+    def _skip_empty(self, chans) -> None:
+        """Skip grid that no signal has a sample near: of a jump, only the last ``max_fill_s`` is emitted."""
+        t_next = self.t0 + self.next_k / self.fs
+        ahead = [c.t[j] for c in chans if (j := int(np.searchsorted(c.t, t_next - _EPS_S))) < len(c.t)]
+        if ahead and min(ahead) - t_next > self.max_fill_s:
+            k = int(math.floor((min(ahead) - self.max_fill_s - self.t0) * self.fs))
+            if k > self.next_k:
+                self.counts["samples_skipped"] += k - self.next_k
+                self.next_k = k
+
     def pop_ready(self) -> AlignedBlock | None:
-        """Every grid sample all signals have reached since the last call, or None."""
+        """The grid samples all signals have reached since the last call (at most ``max_fill_s`` of
+        them: call until None), or None."""
         chans = [self.ch[n] for n in self.names]
         if any(not c.t for c in chans):
+            self._expire(chans)
             return None
         if self.t0 is None:
             self.t0 = max(c.t[0] for c in chans)
@@ -222,6 +268,10 @@ class GridAligner:
         spread = float(lasts.max() - lasts.min())
         limit = float(lasts.min()) if spread <= self.gap_timeout_s else float(lasts.max()) - self.gap_timeout_s
         k_end = int(math.floor((limit - self.t0 + _EPS_S) * self.fs)) + 1
+        if k_end <= self.next_k:
+            return None
+        self._skip_empty(chans)
+        k_end = min(k_end, self.next_k + self.max_fill)   # at most max_fill per call: call again for more
         if k_end <= self.next_k:
             return None
         tk = self.t0 + np.arange(self.next_k, k_end) / self.fs

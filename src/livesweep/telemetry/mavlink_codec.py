@@ -56,6 +56,8 @@ __all__ = [
     "record_from_fields",
     "record_from_message",
     "records_from_columns",
+    "stamp_wrap_units",
+    "vehicle_time_field",
     "vehicle_time_ns",
 ]
 
@@ -431,7 +433,9 @@ def vehicle_time_ns(record: Mapping[str, Any], msgname: str) -> int | None:
     From ``time_usec`` (µs) when the message has that field, else ``time_boot_ms`` (ms).
     The value is converted as is: ``time_usec`` of some messages (e.g. ``SERVO_OUTPUT_RAW``)
     is uint32 and wraps every ~71.6 min, and some messages allow UNIX time there; callers
-    that need continuity must unwrap. A record lacking the field raises LivesweepError.
+    that need continuity must unwrap. A record lacking the field raises LivesweepError. The
+    result may exceed what an MCAP time can hold (a uint64 ``time_usec`` near 2**64 µs): the
+    sources check it (:func:`livesweep.telemetry.clock.UINT64_NS_MAX`) before recording it.
     """
     spec = _spec(msgname)
     if spec.time_field is None:
@@ -443,6 +447,25 @@ def vehicle_time_ns(record: Mapping[str, Any], msgname: str) -> int | None:
     if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
         raise LivesweepError(f"MAVLink {msgname}.{spec.time_field}: {v!r} is not an integer time stamp")
     return int(v) * spec.time_scale_ns
+
+
+def vehicle_time_field(msgname: str) -> tuple[str, int] | None:
+    """(field, nanoseconds per unit) of the vehicle time of ``msgname``, or None if it has none."""
+    spec = _spec(msgname)
+    return None if spec.time_field is None else (spec.time_field, spec.time_scale_ns)
+
+
+def stamp_wrap_units(msgname: str, field: str) -> int | None:
+    """2**32 when ``field`` of ``msgname`` is a uint32 (a time stamp there wraps), else None.
+
+    Unknown messages or fields give None: only a field known to be 32 bits wide may be unwrapped
+    (a uint64 ``time_usec`` near 2**32 µs is not a wrap).
+    """
+    try:
+        f = _spec(msgname).by_name.get(field)
+    except ConfigError:
+        return None
+    return 2**32 if f is not None and f.ctype == "uint32_t" else None
 
 
 # --------------------------------------------------------------------------------------

@@ -1,0 +1,173 @@
+"""Time at the edge: a receive clock that never steps, and vehicle stamps that are checked before use.
+
+A live link carries whatever the vehicle (or an attacker, or a rebooting autopilot) writes into its
+time fields: ``time_usec`` may be microseconds since boot or since the UNIX epoch (MAVLink allows
+both), a uint32 field wraps every 71.6 min, a reboot starts the clock again, and a single corrupt or
+forged frame can carry any 64-bit value. Nothing downstream may trust such a stamp blindly: one
+frame 116 days ahead would make the aligner fill 116 days of grid.
+
+* :class:`ReceiveClock`: receive times in UNIX nanoseconds that advance with the monotonic clock,
+  so an NTP step of the wall clock during a flight does not move frames backwards or forwards.
+* :class:`StampClock`: continuous seconds from one stream's raw stamps. A stamp is *plausible* when
+  its step from the stream's last accepted stamp is no more than ``max_reorder_s`` backwards and no
+  more than ``slack_s + max_rate * (receive step)`` forwards (``max_rate`` allows replays and
+  simulators running faster than real time). An implausible stamp is held; if the next stamps
+  fit the old clock it was an outlier and is dropped and counted; if ``confirm`` consecutive
+  stamps agree with each other instead, the clock re-anchors (a reboot, an epoch switch) and
+  releases them, continuing ``reset_gap_s`` after the last accepted time, so no window spans the
+  discontinuity and the continuous clock never jumps by the size of the step. A uint32 wrap is
+  recognised only for fields declared ``wrap_units`` wide, and only from the top of the range to
+  its bottom.
+
+Everything depends on the frames alone (stamp and receive time), never on the wall clock, so a
+replay of a recording makes the same decisions as the live run.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+__all__ = ["ReceiveClock", "StampClock", "UINT64_NS_MAX"]
+
+#: The largest time an MCAP record can carry [ns].
+UINT64_NS_MAX = 2**64 - 1
+
+
+class ReceiveClock:
+    """UNIX-epoch nanoseconds that advance with :func:`time.monotonic_ns`.
+
+    The epoch offset is read once, when the clock is made; after that a step of the system's wall
+    clock (NTP, a user setting the date) does not move receive times.
+    """
+
+    def __init__(self) -> None:
+        self._offset = time.time_ns() - time.monotonic_ns()
+
+    def now_ns(self) -> int:
+        """Receive time now [ns since the UNIX epoch, monotonic]."""
+        return time.monotonic_ns() + self._offset
+
+
+class StampClock:
+    """Continuous time [s] of one stream of raw stamps, with implausible stamps rejected.
+
+    Parameters
+    ----------
+    scale_s : float
+        Seconds per stamp unit (1e-6 for ``time_usec``, 1e-3 for ``time_boot_ms``).
+    wrap_units : int, optional
+        The field's range when it is an unsigned integer that wraps (2**32 for a uint32
+        ``time_usec``); None: the field does not wrap.
+    max_reorder_s : float
+        Backward steps up to this are reordering: the sample keeps its own time, the anchor stays.
+    slack_s : float
+        Forward step allowed whatever the receive step [s] (link latency jitter, a paused stream).
+    max_rate : float
+        Vehicle seconds allowed per receive second beyond ``slack_s`` (a 100x replay is plausible).
+    confirm : int
+        Consecutive, mutually consistent implausible stamps needed to re-anchor the clock.
+    reset_gap_s : float
+        After a re-anchoring the clock continues this long after the last accepted time [s].
+    establish : bool
+        True: the first anchor, too, needs ``confirm`` consistent stamps (they are held until then
+        and released together), so a bad first stamp can never become the reference of the
+        continuous clock. False: the first stamp anchors at once (enough when only the
+        accept/reject decision is used).
+
+    Attributes
+    ----------
+    wraps, resets, rejected : int
+        Wraps unwrapped, re-anchorings (reboots, epoch switches) and stamps dropped.
+    """
+
+    def __init__(self, scale_s: float, *, wrap_units: int | None = None, max_reorder_s: float = 1.0,
+                 slack_s: float = 5.0, max_rate: float = 100.0, confirm: int = 5, reset_gap_s: float = 1.0,
+                 establish: bool = False):
+        self.scale_s = float(scale_s)
+        self.wrap_units = wrap_units
+        self.max_reorder_s = float(max_reorder_s)
+        self.slack_s = float(slack_s)
+        self.max_rate = float(max_rate)
+        self.confirm = max(int(confirm), 1)
+        self.reset_gap_s = float(reset_gap_s)
+        self.establish = bool(establish)
+        self.offset_s = 0.0
+        self._last_raw: float | None = None
+        self._last_s = 0.0
+        self._last_rx = 0.0
+        self.last_t = -math.inf
+        self._pending: list[tuple] = []       # held samples: (raw, stamp [s], receive [s], payload)
+        self.wraps = self.resets = self.rejected = 0
+
+    @property
+    def warmup(self) -> int:
+        """Stamps held now while the first anchor is being established."""
+        return len(self._pending) if self._last_raw is None else 0
+
+    def _plausible(self, ds: float, dr: float) -> bool:
+        return -self.max_reorder_s <= ds <= self.slack_s + self.max_rate * max(dr, 0.0)
+
+    def feed(self, raw: float, receive_s: float, payload=None) -> list[tuple[float, object]]:
+        """Take stamp ``raw`` received at ``receive_s`` [s]; returns the samples released now.
+
+        Returns
+        -------
+        list of (float, object)
+            ``(t, payload)`` with ``t`` on the continuous clock [s]: the sample itself when its
+            stamp fits the stream's clock; nothing while it is held (it does not fit, and the
+            stamps after it will tell whether the clock changed); or every held sample and this one
+            when enough consecutive stamps confirm a new clock (a reboot, an epoch switch, the
+            first anchor). Held samples that turn out to be outliers are dropped and counted in
+            :attr:`rejected`; so is a stamp that is not a finite number.
+        """
+        try:
+            s = float(raw) * self.scale_s
+        except (OverflowError, TypeError, ValueError):
+            s = math.nan
+        if not math.isfinite(s) or not math.isfinite(receive_s):
+            self.rejected += 1
+            return []
+        if self._last_raw is None and not self.establish:
+            return [self._accept(raw, s, receive_s, payload)]
+        if self._last_raw is not None:
+            ds = s - self._last_s
+            wrap_s = 0.0
+            w = self.wrap_units
+            if w is not None and ds < 0:
+                zone = (self.slack_s + self.max_rate * max(receive_s - self._last_rx, 0.0)) / self.scale_s
+                if self._last_raw >= w - zone and raw < zone:
+                    wrap_s = w * self.scale_s
+            if self._plausible(ds + wrap_s, receive_s - self._last_rx):
+                self._drop_pending()
+                if wrap_s:
+                    self.offset_s += wrap_s
+                    self.wraps += 1
+                elif ds < 0:
+                    return [(s + self.offset_s, payload)]    # reordered: the anchor stays where it is
+                return [self._accept(raw, s, receive_s, payload)]
+        pend = self._pending
+        if pend and not self._plausible(s - pend[-1][1], receive_s - pend[-1][2]):
+            self._drop_pending()
+        pend.append((raw, s, receive_s, payload))
+        if len(pend) < self.confirm:
+            return []
+        # confirmed: the stream is on a (new) clock. The first anchor keeps the stamps' own time; a
+        # re-anchoring (reboot, epoch switch) continues reset_gap_s after the last accepted time,
+        # so no window spans the discontinuity and the clock never jumps by the size of the step.
+        if self._last_raw is not None:
+            self.offset_s = self.last_t + self.reset_gap_s - pend[0][1]
+            self.resets += 1
+        held, self._pending = pend, []
+        return [self._accept(r, x, rx, p) for r, x, rx, p in held]
+
+    def _drop_pending(self) -> None:
+        """The held stamps were outliers (or a false start): count and forget them."""
+        self.rejected += len(self._pending)
+        self._pending = []
+
+    def _accept(self, raw: float, s: float, receive_s: float, payload) -> tuple[float, object]:
+        self._last_raw, self._last_s, self._last_rx = raw, s, receive_s
+        t = s + self.offset_s
+        self.last_t = max(self.last_t, t)
+        return t, payload
