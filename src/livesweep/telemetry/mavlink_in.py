@@ -21,21 +21,43 @@ Nothing is dropped silently: every byte that does not become a frame is counted 
     rejected_unsigned      unsigned frames refused because a signing key is set (and
                            ``allow_unsigned`` is False)
     unsigned_accepted      unsigned frames let through by ``allow_unsigned=True``
-    bad_signature          signed frames whose signature is wrong, or whose signing time
-                           stamp does not increase (replays), per pymavlink's check
+    bad_signature          signed frames refused: a wrong signature (forged, or another key),
+                           or a correct one whose signing time stamp is not newer than its
+                           stream's (a replay)
+    replayed_signature     the part of ``bad_signature`` with a correct signature (replays)
     bad_other              other BAD_DATA (bad incompat flags, undecodable payload)
     unknown_message        frames with a message id the dialect does not know
     seq_gaps               {"sysid/compid": estimated lost frames}, from the 8-bit ``seq``
     seq_repeats            frames that repeat the previous ``seq`` of their source
+    clock_unrepresentable  frames whose time stamp does not fit an MCAP time (uint64 ns): recorded
+                           with their receive time as publish time
+    clock_implausible      frames whose time stamp does not follow their stream's recent clock
+                           (:class:`~livesweep.telemetry.clock.StampClock`): likewise
+    kernel_drops           datagrams the kernel dropped because the socket buffer was full (UDP
+                           on Linux, ``SO_RXQ_OVFL``)
     bytes                  bytes read
 
-Signing (MAVLink 2): with ``signing_key`` set, pymavlink checks every signed frame. pymavlink
-itself rejects unsigned frames *without counting them* when no ``allow_unsigned_callback`` is
-installed (``reference/packages.md`` §1), so this module installs its own callback that counts
-them and answers ``allow_unsigned``. pymavlink also calls that callback for signed frames
-whose signature failed; those are always refused here (``allow_unsigned`` never lets a forged
-signature through) and counted in ``bad_signature`` only. Without a key, signatures are
-ignored and everything is accepted.
+Signing (MAVLink 2): with ``signing_key`` set, every signed frame is checked here, not by
+pymavlink's ``check_signature``: pymavlink stores a frame's signing time stamp as its stream's
+newest *before* it compares the signature, so one forged frame with time stamp 2**48-1 would make
+every later genuine frame of that stream look like a replay. This module compares the signature
+first (SHA-256 of key and frame, constant time) and only then checks and advances the stream's
+time stamp (a new stream may be at most one minute older than the newest time stamp seen, as in
+the MAVLink signing specification). pymavlink itself rejects unsigned frames *without counting
+them* when no ``allow_unsigned_callback`` is installed (``reference/packages.md`` §1), so this
+module installs its own callback that counts them and answers ``allow_unsigned``. pymavlink also
+calls that callback for signed frames whose check failed; those are always refused here
+(``allow_unsigned`` never lets a forged signature through) and counted in ``bad_signature`` only.
+Without a key, signatures are ignored and everything is accepted.
+
+Time: ``receive_ns`` comes from a :class:`~livesweep.telemetry.clock.ReceiveClock` (UNIX time that
+does not step with the wall clock). A ``vehicle_ns`` outside what MCAP can hold, or that does not
+follow its (sysid, compid, time field) stream's recent clock, is replaced by None and counted
+(``clock_unrepresentable``, ``clock_implausible``): the frame is still recorded, with its receive
+time as publish time, and its fields unchanged.
+
+Warnings: each kind of problem is logged once per source (the first occurrence, with an example);
+after that it is only counted.
 
 Loss: ``seq_gaps`` is estimated per (sysid, compid) from ``msg.get_seq()`` (8 bits, wraps at
 256). **A gap that is a multiple of 256 frames is invisible**, and a burst of lost frames is
@@ -52,6 +74,8 @@ from __future__ import annotations
 
 import collections
 import errno
+import hashlib
+import hmac
 import logging
 import math
 import mmap
@@ -60,12 +84,14 @@ import re
 import select
 import socket
 import struct
+import sys
 import time
 from pathlib import Path
 from typing import Any
 
 from livesweep.errors import ConfigError, LivesweepError, LogFormatError
 from livesweep.telemetry import mavlink_codec as codec
+from livesweep.telemetry.clock import UINT64_NS_MAX, ReceiveClock, StampClock
 from livesweep.telemetry.frames import Frame
 from livesweep.telemetry.mavlink_codec import _dialect, mavutil  # imported with MAVLINK20=1
 from livesweep.telemetry.mavlink_out import parse_url
@@ -88,6 +114,13 @@ _TS_WINDOW_US = 24 * 3600 * 1_000_000
 _PROBE_BYTES = 64 * 1024
 # signing time stamps count 10 µs units since 2015-01-01
 _SIGNING_EPOCH_S = 1_420_070_400
+# a new signing stream may be this much older than the newest time stamp seen (1 min in 10 µs units)
+_SIGNING_NEW_STREAM_UNITS = 6_000_000
+# Linux: the socket option that reports the kernel's drop count with every datagram
+_SO_RXQ_OVFL = 40
+_KERNEL_DROPS = sys.platform.startswith("linux")
+# tcpin: the most clients served at once (more are refused and counted)
+_MAX_TCP_CLIENTS = 16
 
 _SHORT_URL_RE = re.compile(r"^(udpin|udp|tcpin):(?::)?(\d{1,5})$")
 _NET_PREFIX_RE = re.compile(r"^(udpout|udpin|udp|tcp|tcpin):")
@@ -103,10 +136,14 @@ def _empty_counts() -> dict[str, Any]:
         "rejected_unsigned": 0,
         "unsigned_accepted": 0,
         "bad_signature": 0,
+        "replayed_signature": 0,
         "bad_other": 0,
         "unknown_message": 0,
         "seq_gaps": {},
         "seq_repeats": 0,
+        "clock_unrepresentable": 0,
+        "clock_implausible": 0,
+        "kernel_drops": 0,
         "bytes": 0,
     }
 
@@ -124,35 +161,65 @@ def _check_key(signing_key: Any) -> bytes | None:
 
 
 class _Decoder:
-    """A bare pymavlink parser plus the counting and Frame building shared by both sources."""
+    """Bare pymavlink parsers plus the checking, counting and Frame building shared by the sources."""
 
     def __init__(self, signing_key: bytes | None, allow_unsigned: bool, *, live: bool) -> None:
-        mav = _dialect.MAVLink(None, srcSystem=0, srcComponent=0)
-        mav.robust_parsing = True  # BAD_DATA messages instead of MAVError exceptions
-        self.mav = mav
         self.counts = _empty_counts()
+        self._key = signing_key
         self._last_seq: dict[tuple[int, int], int] = {}
         self._allow_unsigned = bool(allow_unsigned)
-        self._badsig_seen = 0
         self._warned: set[str] = set()
-        if signing_key is not None:
+        self._stamp_clocks: dict[tuple[int, int, str], StampClock] = {}
+        # signing: newest time stamp per (link id, sysid, compid) and overall [10 µs since 2015].
+        # Live: like mavutil.setup_signing, a *new* stream must not be more than one minute older
+        # than now (rejects replays of old captures). A tlog is old by nature: 0.
+        self._sign_streams: dict[tuple[int, int, int], int] = {}
+        self._sign_time = int(max(time.time() - _SIGNING_EPOCH_S, 0) * 100_000) if live else 0
+        self._refused_signed = False
+        self.mav = self.parser()
+
+    def parser(self) -> Any:
+        """A new pymavlink parser (one per byte stream) that checks signatures through this decoder."""
+        mav = _dialect.MAVLink(None, srcSystem=0, srcComponent=0)
+        mav.robust_parsing = True  # BAD_DATA messages instead of MAVError exceptions
+        if self._key is not None:
             s = mav.signing
-            s.secret_key = signing_key
+            s.secret_key = self._key
             s.sign_outgoing = False
             s.allow_unsigned_callback = self._unsigned_callback
-            # Live: like mavutil.setup_signing, a *new* stream must not be more than one minute
-            # older than now (rejects replays of old captures). A tlog is old by nature: 0.
-            if live:
-                s.timestamp = int(max(time.time() - _SIGNING_EPOCH_S, 0) * 100_000)
-            else:
-                s.timestamp = 0
+            mav.check_signature = self._check_signature   # pymavlink's own trusts the time stamp first
+        return mav
+
+    def _check_signature(self, msgbuf: bytearray, src_system: int, src_component: int) -> bool:
+        """The signature first, then the stream's time stamp (MAVLink 2 signing, replay protection)."""
+        key = self._key
+        assert key is not None
+        expected = hashlib.sha256(key + bytes(msgbuf[:-6])).digest()[:6]
+        if not hmac.compare_digest(expected, bytes(msgbuf[-6:])):
+            self._refuse_signed("bad_signature", "signed MAVLink frame with a wrong signature refused "
+                                "(forged, or signed with another key)")
+            return False
+        stamp = int.from_bytes(bytes(msgbuf[-12:-6]), "little")
+        stream = (msgbuf[-13], src_system, src_component)
+        last = self._sign_streams.get(stream)
+        if (stamp <= last) if last is not None else (stamp + _SIGNING_NEW_STREAM_UNITS < self._sign_time):
+            self.counts["replayed_signature"] += 1
+            self._refuse_signed("bad_signature", "signed MAVLink frame refused: its signing time stamp is not newer "
+                                "than its stream's (a replay)")
+            return False
+        self._sign_streams[stream] = stamp
+        self._sign_time = max(self._sign_time, stamp)
+        return True
+
+    def _refuse_signed(self, counter: str, text: str) -> None:
+        self.counts[counter] += 1
+        self._refused_signed = True
+        self._warn_once(counter, text + "; further ones are only counted")
 
     # pymavlink calls this for unsigned frames AND for signed frames whose check failed
-    # (badsig_count was incremented just before the call in that case).
     def _unsigned_callback(self, mav: Any, msgid: int) -> bool:
-        bad = mav.signing.badsig_count
-        if bad != self._badsig_seen:
-            self._badsig_seen = bad
+        if self._refused_signed:
+            self._refused_signed = False
             return False  # a bad signature is never accepted, not even with allow_unsigned
         if self._allow_unsigned:
             self.counts["unsigned_accepted"] += 1
@@ -166,9 +233,9 @@ class _Decoder:
             self._warned.add(key)
             log.warning("%s", text)
 
-    def reset(self) -> int:
-        """Drop a partial frame left in the parser (end of a datagram); returns its length."""
-        mav = self.mav
+    def reset(self, mav: Any = None) -> int:
+        """Drop a partial frame left in a parser (end of a datagram); returns its length."""
+        mav = self.mav if mav is None else mav
         left = len(mav.buf) - mav.buf_index
         mav.buf = bytearray()
         mav.buf_index = 0
@@ -191,8 +258,34 @@ class _Decoder:
             mav.total_receive_errors += 1
             return _dialect.MAVLink_bad_data(buf, reason.message)
 
-    def pending_bytes(self) -> int:
-        return len(self.mav.buf) - self.mav.buf_index
+    def pending_bytes(self, mav: Any = None) -> int:
+        mav = self.mav if mav is None else mav
+        return len(mav.buf) - mav.buf_index
+
+    def _vehicle_ns(self, rec: dict, mtype: str, receive_ns: int) -> int | None:
+        """The record's vehicle time [ns], or None when it has none or it cannot be trusted (counted)."""
+        vns = codec.vehicle_time_ns(rec, mtype)
+        if vns is None:
+            return None
+        if not 0 <= vns <= UINT64_NS_MAX:
+            self.counts["clock_unrepresentable"] += 1
+            self._warn_once("clock_unrepresentable", f"MAVLink {mtype} from {rec['sysid']}/{rec['compid']}: time stamp "
+                            f"{vns} ns does not fit a log time; recorded with its receive time (further ones are only "
+                            "counted)")
+            return None
+        field, ns_per_unit = codec.vehicle_time_field(mtype)
+        key = (rec["sysid"], rec["compid"], field)
+        clock = self._stamp_clocks.get(key)
+        if clock is None:
+            wrap = codec.stamp_wrap_units(mtype, field)
+            clock = self._stamp_clocks[key] = StampClock(1e-9, wrap_units=None if wrap is None else wrap * ns_per_unit)
+        if not clock.feed(vns, receive_ns * 1e-9):
+            self.counts["clock_implausible"] += 1
+            self._warn_once("clock_implausible", f"MAVLink {mtype} from {rec['sysid']}/{rec['compid']}: {field} "
+                            f"{rec[field]} does not follow the stream's clock; recorded with its receive time "
+                            "(further ones are only counted)")
+            return None
+        return vns
 
     def handle(self, msg: Any, receive_ns: int, out: list[Frame] | collections.deque) -> None:
         """Count ``msg`` and append its Frame to ``out`` when it is a good message."""
@@ -208,18 +301,17 @@ class _Decoder:
                 pass  # counted by the callback (rejected_unsigned) or in bad_signature
             else:
                 c["bad_other"] += 1
-                self._warn_once("other:" + reason[:30], f"MAVLink BAD_DATA: {reason} (further ones are only counted)")
-            c["bad_signature"] = self.mav.signing.badsig_count
+                self._warn_once("bad_other", f"MAVLink BAD_DATA: {reason} (further BAD_DATA are only counted)")
             return
         if mtype.startswith("UNKNOWN_") or msg.get_msgId() < 0:
             c["unknown_message"] += 1
             return
         try:
             rec = codec.record_from_message(msg)
-            vns = codec.vehicle_time_ns(rec, mtype)
+            vns = self._vehicle_ns(rec, mtype, receive_ns)
         except LivesweepError as e:  # a message outside the codec's dialect
             c["unknown_message"] += 1
-            self._warn_once("conv:" + mtype, f"MAVLink {mtype}: not converted ({e}); further ones are only counted")
+            self._warn_once("conversion", f"MAVLink {mtype}: not converted ({e}); further such messages are only counted")
             return
         sysid, compid = rec["sysid"], rec["compid"]
         # sequence gaps per (sysid, compid); 8-bit wrap, multiples of 256 invisible
@@ -241,11 +333,7 @@ class _Decoder:
         out.append(Frame(f"/mavlink/{mtype}", receive_ns, vns, rec))
 
     def snapshot(self) -> dict[str, Any]:
-        c = self.counts
-        c["bad_signature"] = self.mav.signing.badsig_count
-        return {
-            k: (dict(v) if isinstance(v, dict) else v) for k, v in c.items()
-        }
+        return {k: (dict(v) if isinstance(v, dict) else v) for k, v in self.counts.items()}
 
 
 # ======================================================================================
@@ -321,12 +409,20 @@ class MavlinkSource:
     allow_unsigned : bool
         Accept unsigned frames although a key is set (counted in ``unsigned_accepted``).
     rcvbuf_bytes : int
-        ``SO_RCVBUF`` of the socket (the 212 KB Linux default loses bursts, packages.md §1).
+        ``SO_RCVBUF`` asked for (the 212 KB Linux default loses bursts, packages.md §1); the
+        kernel may grant less (``net.core.rmem_max``): :attr:`rcvbuf_granted` says what it gave.
 
     UDP datagrams are parsed one by one; each may hold several frames, and a frame cut at the
     end of a datagram is counted (``bad_prefix_or_garbage``) and discarded so it cannot eat
-    the next datagram's frames. See the module docstring for counters and loss caveats.
+    the next datagram's frames. On Linux every datagram also carries the kernel's count of
+    datagrams dropped for a full socket buffer (``kernel_drops``). ``tcpin`` serves up to 16
+    clients at once, each parsed as its own byte stream, so an idle or slow client never blinds
+    the others (more clients are refused and counted in ``clients_refused``). See the module
+    docstring for counters and loss caveats.
     """
+
+    #: A live link: the monitor records it and may shed analysis load, never recording.
+    live = True
 
     def __init__(
         self,
@@ -342,11 +438,14 @@ class MavlinkSource:
         if isinstance(rcvbuf_bytes, bool) or not isinstance(rcvbuf_bytes, int) or rcvbuf_bytes <= 0:
             raise ConfigError(f"rcvbuf_bytes {rcvbuf_bytes!r} must be a positive integer")
         self._dec = _Decoder(key, allow_unsigned, live=True)
+        self._clock = ReceiveClock()
         self._pending: collections.deque[Frame] = collections.deque()
         self._closed = False
-        self._client: socket.socket | None = None  # tcpin: the accepted client
+        self._clients: dict[socket.socket, Any] = {}  # tcpin: accepted client -> its own parser
         self._eof = False
         self.link_events = 0  # tcp: disconnects seen; tcpin: clients accepted/lost
+        self._refused = 0     # tcpin: clients beyond the limit
+        self.rcvbuf_granted: int | None = None
 
         codec.ensure_mavlink2()
         t = self._target
@@ -363,13 +462,26 @@ class MavlinkSource:
             raise LivesweepError(f"MAVLink input {url!r} cannot be opened: {e}") from None
         self._conn = conn
         self._kind = kind
-        for s in (getattr(conn, "port", None), getattr(conn, "listen", None)):
-            if isinstance(s, socket.socket):
-                try:
-                    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf_bytes)
-                except OSError:  # pragma: no cover - best effort
-                    pass
+        for sock in (getattr(conn, "port", None), getattr(conn, "listen", None)):
+            if isinstance(sock, socket.socket):
+                self.rcvbuf_granted = self._tune(sock, rcvbuf_bytes)
+        if kind == "udpin" and _KERNEL_DROPS:
+            try:
+                conn.port.setsockopt(socket.SOL_SOCKET, _SO_RXQ_OVFL, 1)
+            except OSError:  # pragma: no cover - an old kernel: drops stay unknown
+                pass
         self._rcvbuf = rcvbuf_bytes
+        #: The url as bound (``udpin:127.0.0.1:0`` becomes the port the kernel picked).
+        self.description = self._bound_url()
+
+    @staticmethod
+    def _tune(sock: socket.socket, rcvbuf_bytes: int) -> int | None:
+        """Ask for ``rcvbuf_bytes`` of receive buffer; returns what the kernel granted [bytes]."""
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf_bytes)
+            return sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        except OSError:  # pragma: no cover - best effort
+            return None
 
     # ------------------------------------------------------------------ properties
     @property
@@ -385,9 +497,19 @@ class MavlinkSource:
             return s.getsockname()[:2]
         return None
 
+    def _bound_url(self) -> str:
+        """The url as bound: ``udpin:127.0.0.1:0`` shows the port the kernel picked."""
+        addr = self.local_address
+        if addr is None or self._kind not in ("udpin", "tcpin"):
+            return self.url
+        return f"{self._kind}:{addr[0]}:{addr[1]}"
+
     @property
     def counts(self) -> dict:
         c = self._dec.snapshot()
+        if self._kind == "tcpin":
+            c["clients"] = len(self._clients)
+            c["clients_refused"] = self._refused
         return c
 
     @property
@@ -395,84 +517,108 @@ class MavlinkSource:
         return False
 
     # ------------------------------------------------------------------ reading
-    def _fd(self) -> Any:
+    def _fds(self) -> list[Any]:
         k = self._kind
         if k in ("udpin", "tcp"):
-            return self._conn.port
+            return [self._conn.port]
         if k == "tcpin":
-            return self._client if self._client is not None else self._conn.listen
-        return self._conn.fd
+            return [self._conn.listen, *self._clients]
+        return [self._conn.fd]
+
+    def _recv_udp(self) -> tuple[bytes, Any] | None:
+        sock = self._conn.port
+        try:
+            if _KERNEL_DROPS:
+                data, anc, _flags, addr = sock.recvmsg(65535, 64)
+                for level, kind, payload in anc:
+                    if level == socket.SOL_SOCKET and kind == _SO_RXQ_OVFL and len(payload) >= 4:
+                        self._dec.counts["kernel_drops"] = struct.unpack("I", payload[:4])[0]
+            else:  # pragma: no cover - not Linux
+                data, addr = sock.recvfrom(65535)
+        except (BlockingIOError, InterruptedError):
+            return None
+        except OSError as e:
+            if e.errno == errno.ECONNREFUSED:
+                return None
+            raise LivesweepError(f"MAVLink input {self.url!r}: recvfrom failed ({e})") from None
+        return data, addr
+
+    def _parse(self, data: bytes, mav: Any, out: collections.deque) -> None:
+        dec = self._dec
+        now = self._clock.now_ns()
+        dec.counts["bytes"] += len(data)
+        for m in mav.parse_buffer(data) or ():
+            dec.handle(m, now, out)
+
+    def _accept_clients(self) -> bool:
+        got = False
+        while True:
+            try:
+                sock, _addr = self._conn.listen.accept()
+            except (BlockingIOError, InterruptedError, OSError):
+                return got
+            got = True
+            self.link_events += 1
+            if len(self._clients) >= _MAX_TCP_CLIENTS:
+                self._refused += 1
+                self._dec._warn_once("tcp_clients", f"MAVLink input {self.url}: more than {_MAX_TCP_CLIENTS} TCP "
+                                     "clients; further ones are refused and counted")
+                sock.close()
+                continue
+            sock.setblocking(False)
+            self._tune(sock, self._rcvbuf)
+            self._clients[sock] = self._dec.parser()
+
+    def _read_stream(self, sock: socket.socket, mav: Any, out: collections.deque) -> bool:
+        """One recv from a TCP stream into ``out``; False when nothing was there or it closed."""
+        try:
+            data = sock.recv(65536)
+        except (BlockingIOError, InterruptedError):
+            return False
+        except OSError as e:
+            data = b""
+            log.warning("MAVLink input %s: connection error (%s)", self.url, e)
+        if data:
+            self._parse(data, mav, out)
+            return True
+        self.link_events += 1                         # the peer closed
+        if self._kind == "tcpin":
+            log.warning("MAVLink input %s: a TCP client disconnected (%d left)", self.url, len(self._clients) - 1)
+            self._clients.pop(sock, None)
+            sock.close()
+        else:
+            log.warning("MAVLink input %s: TCP server closed the connection", self.url)
+            self._eof = True
+        return False
 
     def _read_once(self, out: collections.deque) -> bool:
-        """Read one datagram / chunk and decode it into ``out``; False when nothing was there."""
+        """Read what one datagram / each stream holds and decode it into ``out``; False when nothing was there."""
         dec = self._dec
         k = self._kind
         if k == "udpin":
-            try:
-                data, addr = self._conn.port.recvfrom(65535)
-            except (BlockingIOError, InterruptedError):
+            got = self._recv_udp()
+            if got is None:
                 return False
-            except OSError as e:
-                if e.errno == errno.ECONNREFUSED:
-                    return False
-                raise LivesweepError(f"MAVLink input {self.url!r}: recvfrom failed ({e})") from None
-            now = time.time_ns()
-            dec.counts["bytes"] += len(data)
+            data, addr = got
             self._conn.clients.add(addr)
-            msgs = dec.mav.parse_buffer(data) or ()
-            for m in msgs:
-                dec.handle(m, now, out)
+            self._parse(data, dec.mav, out)
             if dec.pending_bytes():  # a frame cut at the end of the datagram
                 dec.reset()
                 dec.counts["bad_prefix_or_garbage"] += 1
             return True
-        if k in ("tcp", "tcpin"):
-            sock = self._conn.port if k == "tcp" else self._client
-            if k == "tcpin" and sock is None:
-                try:
-                    sock, _addr = self._conn.listen.accept()
-                except (BlockingIOError, InterruptedError):
-                    return False
-                except OSError:
-                    return False
-                sock.setblocking(False)
-                try:
-                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, self._rcvbuf)
-                except OSError:  # pragma: no cover
-                    pass
-                self._client = sock
-                self.link_events += 1
-                return True
-            if sock is None or self._eof:
+        if k == "tcpin":
+            got = self._accept_clients()
+            for sock, mav in list(self._clients.items()):
+                got = self._read_stream(sock, mav, out) or got
+            return got
+        if k == "tcp":
+            if self._eof:
                 return False
-            try:
-                data = sock.recv(65536)
-            except (BlockingIOError, InterruptedError):
-                return False
-            except OSError as e:
-                data = b""
-                log.warning("MAVLink input %s: connection error (%s)", self.url, e)
-            if not data:  # peer closed
-                self.link_events += 1
-                if k == "tcpin":
-                    log.warning("MAVLink input %s: TCP client disconnected; waiting for a new one", self.url)
-                    try:
-                        sock.close()
-                    finally:
-                        self._client = None
-                    dec.reset()
-                else:
-                    log.warning("MAVLink input %s: TCP server closed the connection", self.url)
-                    self._eof = True
-                return False
-        else:  # serial
-            data = self._conn.recv(65536)
-            if not data:
-                return False
-        now = time.time_ns()
-        dec.counts["bytes"] += len(data)
-        for m in dec.mav.parse_buffer(data) or ():
-            dec.handle(m, now, out)
+            return self._read_stream(self._conn.port, dec.mav, out)
+        data = self._conn.recv(65536)   # serial
+        if not data:
+            return False
+        self._parse(data, dec.mav, out)
         return True
 
     def _drain(self, out: list[Frame], max_frames: int) -> None:
@@ -502,12 +648,11 @@ class MavlinkSource:
             left = deadline - time.monotonic()
             if left <= 0:
                 break
-            fd = self._fd()
-            if self._eof or fd is None:
+            if self._eof:
                 time.sleep(left)
                 break
             try:
-                select.select([fd], [], [], left)
+                select.select(self._fds(), [], [], left)
             except (OSError, ValueError):  # pragma: no cover - fd closed underneath
                 break
             self._drain(out, max_frames)
@@ -518,12 +663,12 @@ class MavlinkSource:
         if self._closed:
             return
         self._closed = True
-        if self._client is not None:
+        for sock in self._clients:
             try:
-                self._client.close()
+                sock.close()
             except OSError:  # pragma: no cover
                 pass
-            self._client = None
+        self._clients.clear()
         try:
             self._conn.close()
         except (OSError, AttributeError):  # pragma: no cover
@@ -586,6 +731,9 @@ class TlogSource:
     record is counted in ``truncated_tail`` with one warning. Extra counters:
     ``records`` (tlog records with a MAVLink frame), ``garbage_bytes``, ``truncated_tail``.
     """
+
+    #: A file: the monitor reads it at its own pace and never sheds analysis load.
+    live = False
 
     def __init__(self, path: str | os.PathLike, *, speed: float = 0, signing_key: bytes | None = None) -> None:
         self.path = Path(path)
