@@ -87,7 +87,7 @@ def test_source_receives_objects_blocks_and_counts_malformed():
         n_samples = 500
         for i in range(n_samples):
             if i % 10 == 3:  # a block: JSON array of objects (with one non-object inside, every other block)
-                items: list = [{"t_s": i + k / 10, "k": k, "i": i} for k in range(3)]
+                items: list = [{"t_s": i * 0.001 + k * 1e-4, "k": k, "i": i} for k in range(3)]
                 expected["vehicle/blk"] += items
                 if i % 20 == 3:
                     items = items[:1] + [7] + items[1:]
@@ -161,7 +161,11 @@ def test_source_queue_limit_stamp_rules_and_poll_timing():
     assert len(frames) == 10 and c["dropped_queue_full"] == 41  # 51 samples, 10 queued
     assert frames[0].vehicle_ns == 1_234_567_890_123_456_000
     assert frames[1].vehicle_ns is None and frames[2].vehicle_ns is None
-    assert c["bad_stamp"] == 2
+    # t_us 0.. after a stamp 39 years later does not follow the key's clock: no vehicle time (frames
+    # still delivered) until five consecutive stamps agree on the new clock (a re-anchoring)
+    assert [f.vehicle_ns for f in frames[3:7]] == [None] * 4
+    assert [f.vehicle_ns for f in frames[7:]] == [4000, 5000, 6000]
+    assert c["bad_stamp"] == 2 + 4
     assert [f.data["t_us"] for f in frames[3:]] == list(range(7))
 
 

@@ -12,7 +12,12 @@ Threads: Zenoh calls the subscriber callback on its own Python thread, holding t
 happens in :meth:`ZenohSource.poll`, on the caller's thread.
 
 Payloads: a JSON object is one sample; a JSON array of objects is a block of samples (each
-object becomes a frame, in order). Malformed JSON and non-objects are counted, never fatal.
+object becomes a frame, in order). Malformed JSON (also nested too deeply for the parser, or an
+integer with more digits than Python converts) and non-objects are counted, never fatal. A
+stamp that is not a finite number, does not fit an MCAP time, or does not follow its key's recent
+clock (:class:`~livesweep.telemetry.clock.StampClock`) leaves the frame without a vehicle time
+(recorded with its receive time) and is counted in ``bad_stamp``. Receive times come from a
+:class:`~livesweep.telemetry.clock.ReceiveClock` (they never step with the wall clock).
 :class:`ZenohPublisher` puts with ``CongestionControl.BLOCK`` so results are not dropped.
 """
 
@@ -23,6 +28,7 @@ import json
 import logging
 import math
 import os
+import re
 import threading
 import time
 from pathlib import Path
@@ -31,6 +37,7 @@ from typing import Any
 import zenoh
 
 from livesweep.errors import ConfigError, LivesweepError
+from livesweep.telemetry.clock import UINT64_NS_MAX, ReceiveClock, StampClock
 from livesweep.telemetry.frames import Frame
 
 __all__ = ["ZenohPublisher", "ZenohSource", "zenoh_config"]
@@ -40,6 +47,8 @@ log = logging.getLogger(__name__)
 _MODES = ("peer", "client", "router")
 _DEFAULT_LISTEN = zenoh.Config().get_json("listen/endpoints")
 _WILD = ("*", "$", "?", "#")
+# keys whose stamps are checked against their own recent clock (beyond: stamps only range-checked)
+_MAX_STAMP_KEYS = 10_000
 
 
 def _endpoint(e: Any, what: str) -> str:
@@ -83,10 +92,12 @@ def zenoh_config(
         Default ``"peer"`` (or the file's mode with ``config_path``).
     config_path : path, optional
         A user's Zenoh JSON5 file (routers, TLS, several machines), loaded with
-        ``zenoh.Config.from_file``. Its scouting and other settings are kept; ``listen`` /
-        ``connect`` / ``mode`` given here override it. A file that names no listen endpoints
-        listens on nothing (not on Zenoh's default ``tcp/[::]:0``). Missing or invalid files
-        raise :class:`ConfigError` naming the file.
+        ``zenoh.Config.from_file``. Its settings are kept; ``listen`` / ``connect`` / ``mode``
+        given here override it. What the file does not say stays as safe as without a file: a
+        file that names no listen endpoints listens on nothing (not on Zenoh's default
+        ``tcp/[::]:0``), and one that does not mention multicast (or gossip) scouting has it
+        off (Zenoh's default is on: the session would announce itself on the network). Missing
+        or invalid files raise :class:`ConfigError` naming the file.
     """
     if mode is not None and mode not in _MODES:
         raise ConfigError(f"zenoh mode {mode!r} is not one of {', '.join(_MODES)}")
@@ -111,6 +122,11 @@ def zenoh_config(
             _insert(c, "listen/endpoints", [], where)
         if connect_eps is not None:
             _insert(c, "connect/endpoints", connect_eps, where)
+        text = _without_comments(path.read_text(errors="replace"))
+        for kind in ("multicast", "gossip"):
+            if not re.search(rf"\b{kind}\b", text):
+                log.info("zenoh config %s does not mention %s scouting: it stays off", path, kind)
+                _insert(c, f"scouting/{kind}/enabled", False, where)
         return c
     c = zenoh.Config()
     where = "defaults"
@@ -120,6 +136,11 @@ def zenoh_config(
     _insert(c, "scouting/multicast/enabled", False, where)
     _insert(c, "scouting/gossip/enabled", False, where)
     return c
+
+
+def _without_comments(text: str) -> str:
+    """JSON5 text without ``//`` and ``/* */`` comments (a commented-out key is not a setting)."""
+    return re.sub(r"/\*.*?\*/|//[^\n]*", "", text, flags=re.S)
 
 
 def _as_list(v: Any, what: str) -> list:
@@ -175,18 +196,22 @@ class ZenohSource:
         ``connect_port`` give a loopback peer (``tcp/127.0.0.1:<port>``).
     stamp_field : str, optional
         Name of a numeric field holding the vehicle time stamp; ``vehicle_ns`` is
-        ``round(value * stamp_scale_ns_per_unit)`` (default scale 1e9: seconds). Missing or
-        non-numeric values give ``vehicle_ns=None`` and are counted in ``bad_stamp``.
+        ``round(value * stamp_scale_ns_per_unit)`` (default scale 1e9: seconds). Missing,
+        non-numeric, unrepresentable or implausible values give ``vehicle_ns=None`` and are
+        counted in ``bad_stamp``.
     max_queue : int
         Samples buffered between polls; beyond that, samples are dropped and counted in
         ``dropped_queue_full`` (the callback must never block the Zenoh thread).
 
-    Frames: topic ``/zenoh/<sample key>``, ``receive_ns`` = ``time.time_ns()`` in the
+    Frames: topic ``/zenoh/<sample key>``, ``receive_ns`` = the receive clock in the
     callback, ``data`` = the JSON object. ``counts``: ``received`` {key: frames},
     ``samples`` (Zenoh samples), ``malformed`` (not JSON / not UTF-8), ``non_object``
     (JSON values, or array items, that are not objects), ``deletes`` (DELETE samples,
     ignored), ``bad_stamp``, ``dropped_queue_full``.
     """
+
+    #: A live link: the monitor records it and may shed analysis load, never recording.
+    live = True
 
     def __init__(
         self,
@@ -221,6 +246,8 @@ class ZenohSource:
         self._pending: collections.deque[Frame] = collections.deque()
         self._closed = False
         self._warned: set[str] = set()
+        self._clock = ReceiveClock()
+        self._stamp_clocks: dict[str, StampClock] = {}
         cfg = _session_config(config, listen_port, connect_port)
         self._session = _open(cfg, f"source {key_expr!r}")
         try:
@@ -235,10 +262,11 @@ class ZenohSource:
         if len(q) >= self._max_queue:
             self._dropped += 1
             return
+        now = self._clock.now_ns()
         if sample.kind == zenoh.SampleKind.DELETE:
-            q.append((time.time_ns(), str(sample.key_expr), None))
+            q.append((now, str(sample.key_expr), None))
         else:
-            q.append((time.time_ns(), str(sample.key_expr), sample.payload.to_bytes()))
+            q.append((now, str(sample.key_expr), sample.payload.to_bytes()))
         ev = self._event
         if not ev.is_set():
             ev.set()
@@ -263,19 +291,30 @@ class ZenohSource:
             self._warned.add(key)
             log.warning("%s", text)
 
-    def _frame(self, t_ns: int, key: str, obj: dict, out: collections.deque) -> None:
+    def _stamp_ns(self, t_ns: int, key: str, obj: dict) -> int | None:
+        """The sample's vehicle time [ns], or None (counted in ``bad_stamp``) when it cannot be trusted."""
+        v = obj.get(self.stamp_field)
         vns = None
-        sf = self.stamp_field
-        if sf is not None:
-            v = obj.get(sf)
-            if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
-                scale = self.stamp_scale_ns_per_unit
-                if isinstance(v, int) and scale.is_integer():
-                    vns = v * int(scale)  # exact for integer stamps (e.g. µs with scale 1000)
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            scale = self.stamp_scale_ns_per_unit
+            try:
+                vns = v * int(scale) if isinstance(v, int) and scale.is_integer() else int(round(v * scale))
+            except (OverflowError, ValueError):      # inf, nan, beyond float range
+                vns = None
+        if vns is not None and 0 <= vns <= UINT64_NS_MAX:
+            clock = self._stamp_clocks.get(key)
+            if clock is None:
+                if len(self._stamp_clocks) >= _MAX_STAMP_KEYS:
+                    clock = None
                 else:
-                    vns = int(round(v * scale))
-            else:
-                self._counts["bad_stamp"] += 1
+                    clock = self._stamp_clocks[key] = StampClock(1e-9)
+            if clock is None or clock.feed(vns, t_ns * 1e-9):
+                return vns
+        self._counts["bad_stamp"] += 1
+        return None
+
+    def _frame(self, t_ns: int, key: str, obj: dict, out: collections.deque) -> None:
+        vns = None if self.stamp_field is None else self._stamp_ns(t_ns, key, obj)
         self._received[key] = self._received.get(key, 0) + 1
         out.append(Frame(f"/zenoh/{key}", t_ns, vns, obj))
 
