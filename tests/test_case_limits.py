@@ -208,3 +208,25 @@ def test_transfer_function_table_numbers_and_flags_are_checked(tmp_path, raw, wo
         _tf_table(SimpleNamespace(path=tmp_path / "case.toml"), "p_da", table)
     for w in words:
         assert w in str(e.value), (w, str(e.value))
+
+
+def test_resampled_record_size_is_checked_before_resampling(tmp_path):
+    """Ten samples 1e5 s apart resampled at 1 kHz would be 9e8 samples x 2 signals (14 GB)."""
+    from livesweep.pipeline.frequency_response import run_frequency_response_stage
+    from livesweep.telemetry.mcap_log import McapLogWriter
+
+    with McapLogWriter(tmp_path / "a.mcap") as w:
+        w.add_channel("/x", "X", {"type": "object"})
+        for k in range(10):
+            w.write("/x", {"t": k * 1e5, "u": float(k % 3), "y": float(k % 4)}, log_time_ns=k + 1)
+    sigs = '[signals.u]\ntopic = "/x"\nfield = "u"\nstamp = "t"\n[signals.y]\ntopic = "/x"\nfield = "y"\nstamp = "t"\n'
+    text = (CASE.split("[signals.u]")[0].replace('log = "a.mcap"', 'log = "a.mcap"\nlabel = "long"') + sigs
+            + '[spectral]\ninputs = ["u"]\noutputs = ["y"]\nband_rad_s = [0.5, 10.0]\nsample_rate_hz = 1000.0\n')
+    p = tmp_path / "case.toml"
+    p.write_text(text)
+    with pytest.raises(ConfigError) as e:
+        run_frequency_response_stage(load_case(p))
+    msg = str(e.value)
+    for w in (str(p), "spectral.sample_rate_hz = 1000.0", "record 'long'", "0.0 to 900000.0 s",
+              f"{(900_000 * 1000 + 1) * 2} samples x signals", str(limits.MAX_RECORD_VALUES)):
+        assert w in msg, (w, msg)

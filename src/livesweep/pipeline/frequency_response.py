@@ -13,6 +13,7 @@ start and end in trim and each part's trim is removed before the spectra.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
@@ -22,6 +23,7 @@ from livesweep.consistency.kinematics import check_angle_against_rate, euler_ang
 from livesweep.consistency.resample import UniformRecord, concatenate, resample_uniform
 from livesweep.consistency.wildpoints import replace_wild_points
 from livesweep.errors import ConfigError
+from livesweep.limits import MAX_RECORD_VALUES
 from livesweep.spectral.adequacy import (PULSE_LIKE_SLOPE_DB_PER_DECADE, input_power_slope_db_per_decade,
                                          pair_adequacy)
 from livesweep.spectral.analysis import SpectralAnalysis, analyze
@@ -57,11 +59,52 @@ class FrequencyResponseStage:
     data_quality: dict
 
 
-def load_record(case: Case, records: tuple[RecordSpec, ...], names: list[str], sample_rate_hz: float) -> UniformRecord:
-    """Read ``names`` from every record, resample each onto ``sample_rate_hz`` and concatenate them."""
-    parts = []
+def _grid_values(raw: dict, sample_rate_hz: float) -> tuple[int, float, float]:
+    """(samples x signals, start [s], end [s]) of the grid :func:`resample_uniform` would lay over
+    ``raw``: the overlap of the signals' finite samples (an upper bound on what it allocates)."""
+    lo, hi = -math.inf, math.inf
+    for s in raw.values():
+        t = s.t_s[np.isfinite(s.t_s) & np.isfinite(s.values)]
+        if t.size:
+            lo, hi = max(lo, float(t.min())), min(hi, float(t.max()))
+    if not hi > lo:
+        return 0, lo, hi
+    return int((hi - lo) * sample_rate_hz + 1) * len(raw), lo, hi
+
+
+def load_record(case: Case, records: tuple[RecordSpec, ...], names: list[str], sample_rate_hz: float, *,
+                notes: list[str] | None = None) -> UniformRecord:
+    """Read ``names`` from every record, resample each onto ``sample_rate_hz`` and concatenate them.
+
+    Parameters
+    ----------
+    case : Case
+    records : tuple of RecordSpec
+    names : list of str
+        Signals to read.
+    sample_rate_hz : float
+        Grid rate [Hz].
+    notes : list of str, optional
+        Receives a note per log that was unfinished (read up to its torn end) or recovered.
+
+    Raises
+    ------
+    ConfigError
+        When the resampled records would hold more than :data:`~livesweep.limits.MAX_RECORD_VALUES`
+        samples x signals (naming the case file, ``sample_rate_hz`` and the record), before
+        anything is resampled.
+    """
+    parts, total = [], 0
     for rec in records:
-        raw = read_signals(rec, case.signals, names)
+        raw = read_signals(rec, case.signals, names, notes=notes)
+        size, lo, hi = _grid_values(raw, sample_rate_hz)
+        total += size
+        if total > MAX_RECORD_VALUES:
+            raise ConfigError(
+                f"{case.path}: spectral.sample_rate_hz = {sample_rate_hz!r}: record {rec.label or rec.log.name!r} "
+                f"spans {lo!r} to {hi!r} s; resampled with the records before it that is {total} samples x signals "
+                f"({len(names)} signals), more than {MAX_RECORD_VALUES}: lower sample_rate_hz or crop the record "
+                "(start_s, end_s)")
         parts.append(resample_uniform({n: (s.t_s, s.values) for n, s in raw.items()}, sample_rate_hz,
                                       label=rec.label or rec.log.name))
     return parts[0] if len(parts) == 1 else concatenate(parts)
@@ -155,19 +198,22 @@ def run_frequency_response_stage(case: Case) -> FrequencyResponseStage:
     refs = list(sp.references or ())
     names = list(dict.fromkeys([*sp.inputs, *sp.outputs, *refs, *(n for pair in KINEMATIC_PAIRS for n in pair
                                                                    if n in case.signals)]))
-    raw = load_record(case, case.identify, names, sp.sample_rate_hz)
+    notes: list[str] = []
+    raw = load_record(case, case.identify, names, sp.sample_rate_hz, notes=notes)
     record, wild, bias = _repair(raw)
     checks = _kinematic_checks(case, record)
     used = list(dict.fromkeys([*sp.inputs, *sp.outputs, *refs]))
     rows = [record.names.index(n) for n in used]
     valid = np.all(record.valid[rows], axis=0)
-    analysis = analyze(record.values[rows], used, sp.sample_rate_hz, sp.inputs, sp.outputs, sp.band_rad_s,
-                       valid=valid, windows_s=sp.windows_s, overlap=sp.overlap, n_freq=sp.n_freq,
-                       references=refs or None)
+    try:
+        analysis = analyze(record.values[rows], used, sp.sample_rate_hz, sp.inputs, sp.outputs, sp.band_rad_s,
+                           valid=valid, windows_s=sp.windows_s, overlap=sp.overlap, n_freq=sp.n_freq,
+                           references=refs or None)
+    except ConfigError as e:
+        raise ConfigError(f"{case.path}: spectral: {e}") from None
     best = analysis.best
     adequacy = tuple(pair_adequacy(p) for p in best.pairs())
     gaps = {n: {"samples_excluded": int(np.sum(~record.valid_of(n)))} for n in record.names}
-    notes = []
     if refs:
         notes.append("responses formed through the exogenous references " + ", ".join(
             f"{r} -> {i}" for r, i in zip(refs, sp.inputs)) + " as (y/r)(u/r)^-1, free of the bias of disturbances "

@@ -31,6 +31,17 @@ written here. A finished file is read through its summary and indexes
 (:func:`mcap.reader.make_reader`); an unfinished file (no footer: the writer was killed before
 ``finish()``), on which ``make_reader`` fails, is read by streaming every record up to the
 truncated tail.
+
+The readers are total: they yield JSON objects or raise
+:class:`~livesweep.errors.LogFormatError` naming the file, topic, message (index in its topic
+and log time) and field: a message that is not JSON, nests too deeply for the decoder or is not
+an object, a field value beyond the float64 range. Chunk CRCs (and the data-section CRC) are
+checked whenever the writer stored them: a mismatch means the bytes changed after they were
+written, and is an error naming the chunk's byte offset and log-time range rather than a silent
+gap or silently wrong values (the damage cannot be bounded below a chunk).
+:func:`iter_file_order` (the replay's source) can instead skip and count bad messages and chunks
+(:class:`SkippedMessages`). :func:`read_topics_fields` can report, as notes, that a log was
+unfinished or recovered.
 """
 
 from __future__ import annotations
@@ -39,20 +50,21 @@ import json
 import math
 import numbers
 import os
+import zlib
 from collections.abc import Iterable, Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
 
 import numpy as np
 from mcap.reader import make_reader
-from mcap.records import Attachment, Channel, Footer, Header, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
+from mcap.records import Attachment, Channel, Chunk, Footer, Header, Message, Metadata, Schema
+from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.summary import Summary
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import CompressionType, Writer
 
-from livesweep.errors import LogFormatError
+from livesweep.errors import LogFormatError, quote
 
 __all__ = [
     "WRITER_METADATA_NAME",
@@ -64,6 +76,10 @@ __all__ = [
     "read_metadata",
     "read_attachments",
     "read_fields",
+    "read_topics_fields",
+    "iter_file_order",
+    "SkippedMessages",
+    "SKIP_REASONS",
     "recover",
 ]
 
@@ -671,7 +687,7 @@ def _scan(path: Path) -> _Scan:
     saw_footer = False
     with open(path, "rb") as f:
         try:
-            for rec in StreamReader(f, skip_magic=False).records:
+            for rec in StreamReader(f, skip_magic=False, validate_crcs=True).records:
                 if isinstance(rec, Message):
                     if rec.channel_id in channels:
                         messages.append(rec)
@@ -687,6 +703,8 @@ def _scan(path: Path) -> _Scan:
                     header = rec
                 elif isinstance(rec, Footer):
                     saw_footer = True
+        except CRCValidationError as e:   # a whole record whose bytes changed: damage, not a torn tail
+            raise LogFormatError(_crc_error_text(path, e, f"ending at byte {f.tell()}")) from None
         except Exception as e:  # noqa: BLE001 - truncated tail: EndOfFile, torn zstd/lz4 frame, ...
             tail_error = type(e).__name__ + (f": {e}" if str(e) else "")
     return _Scan(header, schemas, channels, messages, metadata, attachments, tail_error,
@@ -735,6 +753,96 @@ def _topic_list(topics: str | Iterable[str] | None) -> list[str] | None:
     return list(topics)
 
 
+# --- messages as JSON objects ------------------------------------------------------------------
+
+#: What :class:`SkippedMessages` counts, by reason.
+SKIP_REASONS = {
+    "not_json": "messages that are not valid JSON (also: not UTF-8, an integer of over 4300 digits)",
+    "too_deep": "messages nested deeper than the JSON decoder's recursion limit",
+    "not_an_object": "messages that are JSON but not an object (an array, number, string or null)",
+    "not_json_encoding": "messages on a channel whose message encoding is not json",
+    "bad_chunks": "chunks that fail their CRC check or do not decompress, skipped whole (their messages are not "
+                  "counted one by one)",
+    "data_section_crc": "1 when the data section's CRC does not match while every chunk's does (nothing dropped)",
+}
+_MAX_SKIP_EXAMPLES = 5
+
+
+@dataclass
+class SkippedMessages:
+    """What a lenient read skipped; pass one to :func:`iter_file_order` (``skipped=``) to have bad
+    messages skipped and counted instead of raising.
+
+    Attributes
+    ----------
+    counts : dict[str, int]
+        Reason (a key of :data:`SKIP_REASONS`) -> how many; reasons that never occurred are absent.
+        The counts grow while the iteration runs.
+    examples : list of str
+        One-line descriptions of the first five skips: file, topic, message index in its topic
+        and log time (or the chunk's byte offset and log-time range), and what was wrong.
+    """
+
+    counts: dict[str, int] = field(default_factory=dict)
+    examples: list[str] = field(default_factory=list)
+
+    @property
+    def total(self) -> int:
+        """Everything skipped, messages and chunks together."""
+        return sum(self.counts.values())
+
+    def add(self, reason: str, text: str) -> None:
+        """Count one skip of ``reason`` (a key of :data:`SKIP_REASONS`) described by ``text``."""
+        self.counts[reason] = self.counts.get(reason, 0) + 1
+        if len(self.examples) < _MAX_SKIP_EXAMPLES:
+            self.examples.append(text)
+
+
+class _BadMessage(Exception):
+    """A message that is not a JSON object; ``reason`` is a key of SKIP_REASONS."""
+
+    def __init__(self, reason: str, text: str) -> None:
+        super().__init__(text)
+        self.reason = reason
+
+
+_JSON_KINDS = {list: "array", str: "string", int: "number", float: "number", bool: "boolean", type(None): "null"}
+
+
+def _json_object(data: bytes) -> dict:
+    """One message's JSON object; _BadMessage saying what it is instead."""
+    try:
+        obj = json.loads(data)
+    except RecursionError:
+        raise _BadMessage("too_deep", "is nested too deeply to decode") from None
+    except ValueError as e:        # JSONDecodeError, UnicodeDecodeError, an integer over 4300 digits
+        raise _BadMessage("not_json", f"is not valid JSON: {e}") from None
+    if not isinstance(obj, dict):
+        raise _BadMessage("not_an_object", f"is a JSON {_JSON_KINDS.get(type(obj), 'value')}, not an object")
+    return obj
+
+
+def _at(path, topic: str, index: int, log_time: int) -> str:
+    """How messages name a message: file, topic, index in its topic (file order), log time."""
+    return f"{path}: topic {topic!r}: message {index} (log_time {log_time} ns)"
+
+
+def _crc_text(path, what: str, expected: int, actual: int) -> str:
+    return (f"{path}: {what} fails its CRC check (stored {expected:#010x}, computed {actual:#010x}): the log "
+            "is damaged (these bytes changed after they were written)")
+
+
+def _crc_error_text(path, e: CRCValidationError, where: str = "") -> str:
+    """_crc_text for mcap's CRCValidationError (a chunk or the data section)."""
+    rec = e.record
+    where = f" {where}" if where else ""
+    if isinstance(rec, Chunk):
+        what = f"the chunk{where} (log times {rec.message_start_time} to {rec.message_end_time} ns)"
+    else:
+        what = f"the data section{where}"
+    return _crc_text(path, what, e.expected, e.actual)
+
+
 def _decode(src: _Source, channel: Channel, msg: Message) -> LogMessage:
     if channel.message_encoding != MessageEncoding.JSON:
         raise LogFormatError(
@@ -742,17 +850,10 @@ def _decode(src: _Source, channel: Channel, msg: Message) -> LogMessage:
             f"{channel.message_encoding!r}, not 'json'; select JSON topics with topics=[...]"
         )
     try:
-        data = json.loads(msg.data)
-    except (ValueError, UnicodeDecodeError) as e:
-        raise LogFormatError(
-            f"{src.path}: topic {channel.topic!r}: message at log_time {msg.log_time} ns "
-            f"(sequence {msg.sequence}) is not valid JSON: {e}"
-        ) from e
-    if not isinstance(data, dict):
-        raise LogFormatError(
-            f"{src.path}: topic {channel.topic!r}: message at log_time {msg.log_time} ns is a JSON "
-            f"{type(data).__name__}, not an object"
-        )
+        data = _json_object(msg.data)
+    except _BadMessage as bad:
+        raise LogFormatError(f"{src.path}: topic {channel.topic!r}: message at log_time {msg.log_time} ns "
+                             f"(sequence {msg.sequence}) {bad}") from None
     return LogMessage(channel.topic, msg.log_time, msg.publish_time, msg.sequence, data)
 
 
@@ -783,8 +884,9 @@ def read_messages(
     Raises
     ------
     LogFormatError
-        If the file is missing, empty or not MCAP, a selected channel is not JSON, or a
-        message is not a JSON object.
+        If the file is missing, empty or not MCAP, a selected channel is not JSON, a message is
+        not a JSON object (not JSON, nested too deeply, an array ...), or a chunk fails its CRC
+        check; naming the file, topic and log time (or the chunk's log-time range).
     """
     src = _open(path)
     where = str(src.path)
@@ -798,7 +900,6 @@ def read_messages(
 
 def _iter_messages(
     src: _Source, wanted: list[str] | None, start_ns: int | None, end_ns: int | None,
-    log_time_order: bool = True,
 ) -> Iterator[LogMessage]:
     if src.scan is not None:
         chans = src.scan.channels
@@ -814,43 +915,102 @@ def _iter_messages(
         return
     try:
         with open(src.path, "rb") as f:
-            reader = make_reader(f)
+            reader = make_reader(f, validate_crcs=True)
             for _schema, channel, msg in reader.iter_messages(
-                topics=wanted, starting_at=start_ns, ending_before=end_ns, log_time_order=log_time_order
+                topics=wanted, starting_at=start_ns, ending_before=end_ns, log_time_order=True
             ):
                 yield _decode(src, channel, msg)
     except LogFormatError:
         raise
+    except CRCValidationError as e:
+        raise LogFormatError(_crc_error_text(src.path, e)) from None
     except Exception as e:  # noqa: BLE001 - McapError, OSError, zstd/lz4 errors on a damaged file
         raise LogFormatError(f"cannot read messages from MCAP log {src.path}: {type(e).__name__}: {e}") from e
+
+
+def _reference_walk(src: _Source, chans: Mapping[int, Channel]) -> Iterator[tuple[int, int, int, bytes]]:
+    """(channel_id, log_time, publish_time, data) of ``chans`` in file order, from the linear scan
+    (unfinished files) or mcap's reader with CRC checks (when the fast walk declines a file)."""
+    if src.scan is not None:
+        for m in src.scan.messages:
+            if m.channel_id in chans:
+                yield m.channel_id, m.log_time, m.publish_time, m.data
+        return
+    topics = sorted({c.topic for c in chans.values()})
+    try:
+        with open(src.path, "rb") as f:
+            for _s, ch, m in make_reader(f, validate_crcs=True).iter_messages(topics=topics, log_time_order=False):
+                yield ch.id, m.log_time, m.publish_time, m.data
+    except CRCValidationError as e:
+        raise LogFormatError(_crc_error_text(src.path, e)) from None
+    except Exception as e:  # noqa: BLE001 - McapError, OSError, zstd/lz4 errors on a damaged file
+        raise LogFormatError(f"cannot read messages from MCAP log {src.path}: {type(e).__name__}: {e}") from e
+
+
+def _walk(src: _Source, chans: Mapping[int, Channel],
+          skipped: SkippedMessages | None = None) -> Iterable[tuple[int, int, int, bytes]]:
+    """(channel_id, log_time, publish_time, data) of ``chans`` in file order: the fast walk for a
+    finished file, else (or when it declines the file) :func:`_reference_walk`."""
+    if src.summary is not None:
+        try:
+            walked = _fast_message_walk(src.path, set(chans), skipped)
+        except LogFormatError:
+            raise
+        except Exception:  # noqa: BLE001 - any surprise: the reference reader decides
+            walked = None
+        if walked is not None:
+            return walked
+    return _reference_walk(src, chans)
 
 
 # --- fast message walk ------------------------------------------------------------------------
 # mcap's reader parses every record through Python objects (about 28 us a message here); for the
 # common case of a finished, chunked file with zstd/lz4/no compression this walk does the same with
 # struct over each decompressed chunk (a few us a message). Anything unexpected -> None, and the
-# caller falls back to mcap's reader.
+# caller falls back to mcap's reader. CRCs are checked here as mcap's reader does with
+# validate_crcs=True: each chunk's CRC of its uncompressed bytes, and the data section's CRC, when
+# the writer stored them (non-zero).
 
 _OP_MESSAGE, _OP_CHUNK, _OP_FOOTER, _OP_DATA_END = 0x05, 0x06, 0x02, 0x0F
-_MAGIC = b"\x89MCAP0\r\n"
+_MESSAGE_HEAD = 22                  # channel id, sequence, log time, publish time
+#: Largest uncompressed chunk read [bytes]; writers use 1 MiB or less (livesweep: 256 KiB).
+_MAX_CHUNK_BYTES = 2**30
 
 
 def _decompress(kind: str, data: bytes, size: int) -> bytes | None:
+    """A chunk's ``size`` uncompressed bytes; None for a compression this walk does not read.
+
+    Never produces more than ``size + 1`` bytes (a crafted zstd frame may declare gigabytes); raises
+    ValueError (or the codec's error) when the bytes do not decompress to exactly ``size``.
+    """
     if kind == "":
-        return data
-    if kind == "zstd":
+        out = data
+    elif kind == "zstd":
         import zstandard
 
-        return zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
-    if kind == "lz4":
+        if zstandard.frame_content_size(data) > size:
+            raise ValueError(f"its zstd frame declares {zstandard.frame_content_size(data)} bytes")
+        out = zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
+    elif kind == "lz4":
         import lz4.frame
 
-        return lz4.frame.decompress(data)
-    return None
+        out = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
+    else:
+        return None
+    if len(out) != size:
+        raise ValueError(f"it decompresses to {len(out)} bytes")
+    return out
 
 
-def _fast_message_walk(path: Path, channel_ids: set[int]) -> list[tuple[int, int, int, bytes]] | None:
-    """(channel_id, log_time, publish_time, data) of the wanted channels in file order, or None."""
+def _fast_message_walk(path: Path, channel_ids: set[int],
+                       skipped: SkippedMessages | None = None) -> list[tuple[int, int, int, bytes]] | None:
+    """(channel_id, log_time, publish_time, data) of the wanted channels in file order, or None.
+
+    A damaged chunk (its CRC does not match, it does not decompress to its declared size, or it
+    declares more than ``_MAX_CHUNK_BYTES``) raises LogFormatError naming the file, the chunk's
+    byte offset and its log-time range; with ``skipped`` it is left out and counted instead (so is
+    a data-section CRC mismatch).
+    """
     import struct
 
     buf = path.read_bytes()
@@ -870,30 +1030,56 @@ def _fast_message_walk(path: Path, channel_ids: set[int]) -> list[tuple[int, int
             if body + length > stop:
                 return False
             if op == _OP_MESSAGE:
+                if length < _MESSAGE_HEAD:
+                    return False
                 cid, _seq, log_t, pub_t = unpack_msg(data, body)
                 if cid in channel_ids:
-                    out.append((cid, log_t, pub_t, data[body + 22:body + length]))
+                    out.append((cid, log_t, pub_t, data[body + _MESSAGE_HEAD:body + length]))
             p = body + length
         return True
+
+    def damaged(text: str, reason: str) -> None:
+        if skipped is None:
+            raise LogFormatError(text)
+        skipped.add(reason, text)
 
     while pos < end:
         op, length = unpack_hdr(buf, pos)
         body = pos + 9
         if op == _OP_CHUNK:
-            q = body + 8 + 8                                     # message start/end time
-            (size,) = struct.unpack_from("<Q", buf, q)
-            q += 8 + 4                                           # uncompressed size, crc
+            t0, t1, size, crc = struct.unpack_from("<QQQI", buf, body)
+            q = body + 28
             (clen,) = struct.unpack_from("<I", buf, q)
             kind = buf[q + 4:q + 4 + clen].decode()
             q += 4 + clen
             (rlen,) = struct.unpack_from("<Q", buf, q)
             q += 8
-            data = _decompress(kind, buf[q:q + rlen], size)
-            if data is None or len(data) != size or not walk(data, 0, size):
-                return None
+            what = f"the chunk at byte {pos} (log times {t0} to {t1} ns)"
+            if size > _MAX_CHUNK_BYTES:
+                damaged(f"{path}: {what} declares {size} bytes uncompressed; livesweep reads chunks of at most "
+                        f"{_MAX_CHUNK_BYTES} bytes", "bad_chunks")
+            else:
+                try:
+                    data = _decompress(kind, buf[q:q + rlen], size)
+                except Exception as e:  # noqa: BLE001 - ValueError, zstd/lz4 errors: damaged bytes
+                    damaged(f"{path}: {what} does not decompress ({kind}) to the {size} bytes it declares: "
+                            f"{e}; the log is damaged", "bad_chunks")
+                else:
+                    if data is None:
+                        return None
+                    actual = zlib.crc32(data)
+                    if crc and actual != crc:
+                        damaged(_crc_text(path, what, crc, actual), "bad_chunks")
+                    elif not walk(data, 0, size):
+                        return None
         elif op == _OP_MESSAGE:
             if not walk(buf, pos, body + length):
                 return None
+        elif op == _OP_DATA_END:
+            (crc,) = struct.unpack_from("<I", buf, body)
+            actual = zlib.crc32(memoryview(buf)[:pos])
+            if crc and actual != crc:
+                damaged(_crc_text(path, "the data section", crc, actual), "data_section_crc")
         elif op == _OP_FOOTER:
             break
         pos = body + length
@@ -1058,58 +1244,73 @@ def read_fields(
     return read_topics_fields(path, {topic: list(fields)}, time, missing=missing)[topic]
 
 
-def _topic_objects(src: _Source, topics: list[str]) -> dict[str, tuple[list[int], list[int], list]]:
-    """Per topic: log times, publish times and decoded JSON objects, in file order.
+def _topic_objects(src: _Source, topics: list[str]) -> dict[str, tuple[list[int], list[int], list[dict]]]:
+    """Per topic: log times, publish times and JSON objects, in file order.
 
     Finished files take the fast walk and decode each topic's messages as one JSON array (C speed);
-    anything else goes through mcap's reader message by message.
+    anything else goes through the linear scan or mcap's reader.
     """
-    out: dict[str, tuple[list[int], list[int], list]] = {t: ([], [], []) for t in topics}
-    walked = None
-    if src.summary is not None:
-        chans = {cid: c for cid, c in src.channels.items() if c.topic in topics}
-        if all(c.message_encoding == "json" for c in chans.values()):
-            try:
-                walked = _fast_message_walk(src.path, set(chans))
-            except Exception:  # noqa: BLE001 - any surprise: the reference reader decides
-                walked = None
-    if walked is None:
-        for m in _iter_messages(src, topics, None, None, log_time_order=False):
-            lt, pt, objs = out[m.topic]
-            lt.append(m.log_time_ns)
-            pt.append(m.publish_time_ns)
-            objs.append(m.data)
-        return out
-    raw: dict[str, list[bytes]] = {t: [] for t in topics}
-    for cid, log_t, pub_t, data in walked:
-        topic = chans[cid].topic
-        out[topic][0].append(log_t)
-        out[topic][1].append(pub_t)
-        raw[topic].append(data)
-    for topic, datas in raw.items():
+    chans = {cid: c for cid, c in src.channels.items() if c.topic in topics}
+    for c in chans.values():
+        if c.message_encoding != MessageEncoding.JSON:
+            raise LogFormatError(f"{src.path}: topic {c.topic!r} has message encoding {c.message_encoding!r}, "
+                                 "not 'json'")
+    raw: dict[str, tuple[list[int], list[int], list[bytes]]] = {t: ([], [], []) for t in topics}
+    for cid, log_t, pub_t, data in _walk(src, chans):
+        lt, pt, datas = raw[chans[cid].topic]
+        lt.append(log_t)
+        pt.append(pub_t)
+        datas.append(data)
+    return {t: (lt, pt, _objects(src.path, t, lt, datas)) for t, (lt, pt, datas) in raw.items()}
+
+
+def _objects(path: Path, topic: str, log_times: list[int], datas: list[bytes]) -> list[dict]:
+    """The JSON objects of one topic's messages: one C-speed decode of them all as an array, else
+    message by message, naming the first that is not a JSON object."""
+    try:
+        objs = json.loads(b"[" + b",".join(datas) + b"]")
+    except (ValueError, RecursionError):
+        objs = None
+    if objs is not None and len(objs) == len(datas) and all(type(o) is dict for o in objs):
+        return objs
+    out = []
+    for k, data in enumerate(datas):
         try:
-            objs = json.loads(b"[" + b",".join(datas) + b"]")
-        except ValueError:
-            objs = None
-        if objs is None or len(objs) != len(datas) or not all(isinstance(o, dict) for o in objs):
-            for k, data in enumerate(datas):   # find and name the culprit
-                try:
-                    o = json.loads(data)
-                except ValueError as e:
-                    raise LogFormatError(f"{src.path}: topic {topic!r}: message {k} (log_time {out[topic][0][k]} ns) "
-                                         f"is not JSON: {e}") from e
-                if not isinstance(o, dict):
-                    raise LogFormatError(f"{src.path}: topic {topic!r}: message {k} (log_time {out[topic][0][k]} ns) "
-                                         "is not a JSON object")
-        out[topic][2].extend(objs)
+            out.append(_json_object(data))
+        except _BadMessage as bad:
+            raise LogFormatError(f"{_at(path, topic, k, log_times[k])} {bad}") from None
     return out
 
 
 _MISSING = object()
 
 
+def _not_a_number(col: list) -> tuple[int, str] | None:
+    """(index, what is wrong) of the first value of ``col`` that is neither null nor a finite
+    float64 (numbers beyond the float64 range, strings, arrays, objects); None if there is none."""
+    for k, v in enumerate(col):
+        if v is None or isinstance(v, bool):
+            continue
+        if not isinstance(v, (int, float, str)):
+            return k, f"is a JSON {_JSON_KINDS.get(type(v), 'object')}, not a number"
+        try:
+            x = np.float64(v)
+        except OverflowError:
+            return k, "is a number beyond the float64 range (|x| > 1.8e308)"
+        except (TypeError, ValueError):
+            return k, "is not a number"
+        if np.isinf(x):
+            return k, "is a number beyond the float64 range (|x| > 1.8e308)"
+    return None
+
+
 def _column(objs: list, field: str, missing: str, where: str, log_times: list[int]) -> np.ndarray:
-    """One float column of ``field`` over ``objs`` (null -> NaN); errors name the message."""
+    """One float column of ``field`` over ``objs`` (null -> NaN); errors name the message.
+
+    A value beyond the float64 range (a 400-digit integer, ``1e400``) is an error, not NaN: no
+    sensor logs it, so it marks a damaged or crafted message, and the message is named so the
+    record can be cropped around it.
+    """
     if "." in field:
         col = [v if found else _MISSING for found, v in (_get_field(o, field) for o in objs)]
     else:
@@ -1118,44 +1319,92 @@ def _column(objs: list, field: str, missing: str, where: str, log_times: list[in
         k = next(i for i, v in enumerate(col) if v is _MISSING)
         if missing == "error":
             raise LogFormatError(f"{where}: field {field!r} is missing from message {k} (log_time {log_times[k]} ns); "
-                                 f"fields present: {sorted(objs[k])}")
+                                 f"fields present: {quote(sorted(objs[k]))}")
         col = [math.nan if v is _MISSING else v for v in col]
     try:
         arr = np.array(col, dtype=np.float64)          # None -> nan, bool -> 0/1
-    except (TypeError, ValueError):
-        k = next(i for i, v in enumerate(col) if not (v is None or isinstance(v, (int, float))))
-        raise LogFormatError(f"{where}: field {field!r} of message {k} (log_time {log_times[k]} ns) is not a number: "
-                             f"{col[k]!r}") from None
+    except (TypeError, ValueError, OverflowError):
+        arr = None
+    if arr is None or arr.ndim != 1 or np.isinf(arr).any():
+        bad = _not_a_number(col)
+        if bad is None:                  # numpy refused what each value alone passes: name the field
+            raise LogFormatError(f"{where}: field {field!r}: the values cannot be read as float64 numbers")
+        k, what = bad
+        raise LogFormatError(f"{where}: field {field!r} of message {k} (log_time {log_times[k]} ns) {what}: "
+                             f"{quote(col[k])}")
     return arr
 
 
-def iter_file_order(path: str | os.PathLike[str], topics=None) -> Iterator[LogMessage]:
-    """Every message (or those of ``topics``) in file order, decoded; the fast walk when possible.
+def iter_file_order(path: str | os.PathLike[str], topics: str | Iterable[str] | None = None, *,
+                    skipped: SkippedMessages | None = None) -> Iterator[LogMessage]:
+    """Every message (or those of ``topics``) in file order, as JSON objects; the fast walk when possible.
 
     File order is the order a livesweep recorder received the messages in, which is what a replay
-    must reproduce. Sequence numbers are per topic, counted here.
+    must reproduce.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        MCAP file, finished or unfinished.
+    topics : str or iterable of str, optional
+        Only these topics; all when None.
+    skipped : SkippedMessages, optional
+        Lenient mode, for a replay: a message that is not a JSON object (not JSON, nested too
+        deeply, an array ...), a message on a channel whose encoding is not JSON, and a chunk
+        that fails its CRC check or does not decompress are skipped and counted in
+        ``skipped.counts`` (reasons in :data:`SKIP_REASONS`) instead of raising. Read the counts
+        during or after the iteration.
+
+    Yields
+    ------
+    LogMessage
+        ``data`` is always a dict. ``sequence`` is the message's index among its topic's messages
+        in file order, counted here; skipped messages take their index too, so a replayed
+        sequence shows where messages were skipped.
+
+    Raises
+    ------
+    LogFormatError
+        The file is missing or not MCAP; without ``skipped``, the first bad message (naming file,
+        topic, index in its topic and log time) or damaged chunk (byte offset and log-time range).
+        In both modes: a damaged chunk that only mcap's reader can reach (an unfinished file, or
+        a finished one in a layout the fast walk declines), which cannot be stepped over.
     """
     src = _open(path)
     wanted = _topic_list(topics) or src.topics()
-    walked = None
     chans = {cid: c for cid, c in src.channels.items() if c.topic in wanted}
-    if src.summary is not None and all(c.message_encoding == "json" for c in chans.values()):
+    index: dict[int, int] = {}
+    for cid, log_t, pub_t, data in _walk(src, chans, skipped):
+        k = index.get(cid, 0)
+        index[cid] = k + 1
+        ch = chans[cid]
         try:
-            walked = _fast_message_walk(src.path, set(chans))
-        except Exception:  # noqa: BLE001 - the reference reader decides
-            walked = None
-    if walked is None:
-        yield from _iter_messages(src, wanted, None, None, log_time_order=False)
-        return
-    seq: dict[int, int] = {}
-    for cid, log_t, pub_t, data in walked:
-        try:
-            obj = json.loads(data)
-        except ValueError as e:
-            raise LogFormatError(f"{src.path}: topic {chans[cid].topic!r}: message at {log_t} ns is not JSON: {e}") from e
-        k = seq.get(cid, 0)
-        seq[cid] = k + 1
-        yield LogMessage(chans[cid].topic, log_t, pub_t, k, obj)
+            if ch.message_encoding != MessageEncoding.JSON:
+                raise _BadMessage("not_json_encoding", f"is on a channel with message encoding "
+                                                       f"{ch.message_encoding!r}, not 'json'")
+            obj = _json_object(data)
+        except _BadMessage as bad:
+            text = f"{_at(src.path, ch.topic, k, log_t)} {bad}"
+            if skipped is None:
+                raise LogFormatError(text) from None
+            skipped.add(bad.reason, text)
+            continue
+        yield LogMessage(ch.topic, log_t, pub_t, k, obj)
+
+
+def _condition_notes(src: _Source) -> list[str]:
+    """Notes for a log that was unfinished (read up to its torn end) or recovered from one."""
+    notes = []
+    if not src.complete and src.scan is not None:
+        stopped = src.scan.tail_error or "no footer"
+        notes.append(f"log {src.path} is unfinished (truncated: the writer stopped before closing it); read up to "
+                     f"its torn end ({stopped}): {len(src.scan.messages)} messages read")
+    rec = _read_metadata(src).get("livesweep.recover")
+    if rec is not None:
+        notes.append(f"log {src.path} was recovered from the unfinished log {rec.get('source', '?')} "
+                     f"(livesweep recover: {rec.get('messages_recovered', '?')} messages kept, reading stopped at "
+                     f"{rec.get('stopped_at', '?')}); data after the truncation is missing")
+    return notes
 
 
 def read_topics_fields(
@@ -1164,6 +1413,7 @@ def read_topics_fields(
     time: str = "log",
     *,
     missing: str = "error",
+    notes: list[str] | None = None,
 ) -> dict[str, dict[str, np.ndarray]]:
     """:func:`read_fields` for several topics in one pass over the file.
 
@@ -1177,11 +1427,21 @@ def read_topics_fields(
     requests : mapping of topic -> list of field names
     time, missing
         As for :func:`read_fields`.
+    notes : list of str, optional
+        Receives one line per condition of the log a report should mention: unfinished (no
+        footer, read up to its torn end; with the number of messages read) or recovered by
+        :func:`recover` (with the number of messages it kept).
 
     Returns
     -------
     dict
         ``{topic: {field: float64 array, "t_ns": int64 array}}``.
+
+    Raises
+    ------
+    LogFormatError
+        As :func:`read_fields`; also a message that is not a JSON object, a value beyond the
+        float64 range, or a damaged chunk (CRC mismatch), naming file, topic, message and field.
     """
     if time not in ("log", "publish"):
         raise LogFormatError(f"{path}: time must be 'log' or 'publish', got {time!r}")
@@ -1205,8 +1465,9 @@ def read_topics_fields(
         out = {f: _column(objs, f, missing, where, log_t)[order] for f in fields}
         out["t_ns"] = np.asarray(log_t if time == "log" else pub_t, dtype=np.int64)[order]
         result[topic] = out
+    if notes is not None:
+        notes.extend(_condition_notes(src))
     return result
-
 
 
 def recover(path: str | os.PathLike[str], out_path: str | os.PathLike[str]) -> int:

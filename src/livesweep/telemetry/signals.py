@@ -61,7 +61,8 @@ def _group_by_topic(specs: Iterable[SignalSpec]) -> dict[str, list[SignalSpec]]:
     return groups
 
 
-def _read_topics(log: Path, groups: Mapping[str, list[SignalSpec]]) -> dict[str, dict[str, np.ndarray]]:
+def _read_topics(log: Path, groups: Mapping[str, list[SignalSpec]],
+                 notes: list[str] | None) -> dict[str, dict[str, np.ndarray]]:
     """Every field (values and stamps) of every topic the signals need, in one pass over the log."""
     requests: dict[str, list[str]] = {}
     for topic, specs in groups.items():
@@ -71,7 +72,7 @@ def _read_topics(log: Path, groups: Mapping[str, list[SignalSpec]]) -> dict[str,
                 if f is not None and f not in fields:
                     fields.append(f)
     try:
-        return read_topics_fields(log, requests, time="log")
+        return read_topics_fields(log, requests, time="log", notes=notes)
     except LogFormatError as e:
         names = ", ".join(s.name for specs in groups.values() for s in specs)
         raise LogFormatError(f"signal(s) {names}: {e}") from e
@@ -131,7 +132,8 @@ def _make_signal(log: Path, record: RecordSpec, spec: SignalSpec, cols: Mapping[
                      source=f"{log.name}:{spec.topic}.{spec.field}")
 
 
-def read_signals(record: RecordSpec, signals: Mapping[str, SignalSpec], names: Iterable[str]) -> dict[str, RawSignal]:
+def read_signals(record: RecordSpec, signals: Mapping[str, SignalSpec], names: Iterable[str], *,
+                 notes: list[str] | None = None) -> dict[str, RawSignal]:
     """Read named signals from one log.
 
     The log is read once for all topics (:func:`~livesweep.telemetry.mcap_log.read_topics_fields`),
@@ -146,6 +148,9 @@ def read_signals(record: RecordSpec, signals: Mapping[str, SignalSpec], names: I
         Where each signal lives (a case's ``[signals]``).
     names : iterable of str
         Which signals to read.
+    notes : list of str, optional
+        Receives a one-line note when the log was unfinished (read up to its torn end) or was
+        recovered from an unfinished log (:func:`~livesweep.telemetry.mcap_log.read_topics_fields`).
 
     Returns
     -------
@@ -173,7 +178,7 @@ def read_signals(record: RecordSpec, signals: Mapping[str, SignalSpec], names: I
     out: dict[str, RawSignal] = {}
     specs_by_name = {n: replace(signals[n], name=n) for n in names}  # the key is the name
     groups = _group_by_topic(specs_by_name.values())
-    all_cols = _read_topics(log, groups)
+    all_cols = _read_topics(log, groups, notes)
     for topic, specs in groups.items():
         cols = all_cols[topic]
         for s in specs:
