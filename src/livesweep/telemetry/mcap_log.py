@@ -138,6 +138,30 @@ def _sanitize(obj: Any, counter: list[int]) -> Any:
     return obj
 
 
+def _open_locked(path: Path, *, exclusive: bool, where: str) -> BinaryIO:
+    """``path`` opened for writing from its start, with an exclusive ``flock`` held while it is open.
+
+    The lock is taken before the file is truncated, so a second writer never damages the first
+    one's file; it is released when the file is closed (also when the process dies).
+    """
+    import fcntl
+
+    flags = os.O_WRONLY | os.O_CREAT | (os.O_EXCL if exclusive else 0)
+    try:
+        fd = os.open(path, flags, 0o644)
+    except FileExistsError:
+        raise LogFormatError(f"MCAP log {where} exists: it is not overwritten unless asked (--force)") from None
+    except OSError as e:
+        raise LogFormatError(f"cannot write MCAP log {where}: {e.strerror or type(e).__name__} ({path})") from e
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        raise LogFormatError(f"MCAP log {where}: another process is writing {path}") from None
+    os.ftruncate(fd, 0)
+    return os.fdopen(fd, "wb")
+
+
 def _str_map(values: Mapping[Any, Any] | None, where: str) -> dict[str, str]:
     if values is None:
         return {}
@@ -176,6 +200,12 @@ class McapLogWriter:
         Call ``file.flush()`` every this many messages (0: never). The open chunk is not
         finished by this, so a killed process loses at most that chunk plus the messages
         since the last flush.
+    overwrite : bool
+        False: an existing ``path`` is an error (a recording or a source log is never replaced
+        unless asked); in non-atomic mode the file is also created exclusively, so two writers
+        racing for one name cannot both get it. Whatever this says, the file being written is
+        locked (``flock``) while it is open: a second writer on the same file fails at once with
+        a clear error instead of interleaving its bytes.
 
     Attributes
     ----------
@@ -205,6 +235,7 @@ class McapLogWriter:
         compression: str = "zstd",
         atomic: bool = True,
         flush_every: int = 1000,
+        overwrite: bool = True,
     ) -> None:
         self._path = Path(path)
         where = str(self._path)
@@ -226,13 +257,10 @@ class McapLogWriter:
         self._library = library
         self._flush_every = flush_every
         self._file_path = self._path.with_name(self._path.name + ".partial") if atomic else self._path
-        try:
-            self._file: BinaryIO | None = open(self._file_path, "wb")  # noqa: SIM115
-        except OSError as e:
-            raise LogFormatError(
-                f"cannot write MCAP log {where}: {e.strerror or type(e).__name__} "
-                f"({self._file_path})"
-            ) from e
+        if not overwrite and self._path.exists():
+            raise LogFormatError(f"MCAP log {where} exists: it is not overwritten unless asked (--force)")
+        self._file: BinaryIO | None = _open_locked(self._file_path, exclusive=not overwrite and not atomic,
+                                                   where=where)
         self._writer = Writer(
             self._file,
             chunk_size=chunk_size,
