@@ -641,3 +641,98 @@ def test_bin_path_is_never_executed(tmp_path):
     with TlogSource(good) as src:
         assert [f.data for f in read_all(src)] == [att_record(k) for k in range(5)]
     assert not marker.exists()
+
+
+# ----------------------------------------------------------------------------- hardening
+
+
+def test_a_forged_signed_frame_does_not_block_later_genuine_frames():
+    """The attack: a copy of a genuine frame's header with signing time stamp 2**48-1 and a random
+    signature, sent without the key. pymavlink's own check stores that time stamp before comparing
+    the signature, after which every genuine frame of the stream looks like a replay."""
+    pack = packer(sysid=5, key=KEY)
+    genuine = [pack(k) for k in range(1010)]
+    g = bytearray(genuine[10])
+    g[-12:-6] = (2**48 - 1).to_bytes(6, "little")
+    g[-6:] = os.urandom(6)
+    src, port = udp_source(signing_key=KEY)
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            for d in genuine[:10] + [bytes(g)] + genuine[10:]:
+                s.sendto(d, ("127.0.0.1", port))
+            frames = collect(src, 1010, timeout=10)
+            c = src.counts
+    finally:
+        src.close()
+    assert [f.data["time_boot_ms"] for f in frames] == [1000 + k for k in range(1010)]
+    assert c["bad_signature"] == 1 and c["replayed_signature"] == 0 and c["received"] == {"ATTITUDE": 1010}
+
+
+def test_poison_stamps_are_recorded_with_their_receive_time_and_counted():
+    """A uint64 time_usec of 2**64-1 µs is beyond what an MCAP time holds (2**64 ns); one frame
+    116 days ahead and one from the UNIX epoch do not follow the stream's clock. Each frame is
+    delivered whole, without a vehicle time, and counted; the stream's clock is not disturbed."""
+    def imu(t_usec):
+        return codec.record_from_fields("HIGHRES_IMU", {"time_usec": t_usec, "xacc": 1.0}, sysid=1, compid=1)
+
+    t = [1_000_000 + 10_000 * k for k in range(40)]
+    stamps = t[:10] + [2**64 - 1] + t[10:20] + [t[19] + 116 * 86_400 * 10**6] + t[20:30] \
+        + [1_700_000_000 * 10**6] + t[30:]
+    src, port = udp_source()
+    try:
+        with MavlinkSender(f"udpout:127.0.0.1:{port}") as tx:
+            for st in stamps:
+                tx.send_record("HIGHRES_IMU", imu(st))
+        frames = collect(src, len(stamps))
+        c = src.counts
+    finally:
+        src.close()
+    assert [f.data["time_usec"] for f in frames] == stamps
+    bad = {10, 21, 32}
+    assert [k for k, f in enumerate(frames) if f.vehicle_ns is None] == sorted(bad)
+    assert all(f.vehicle_ns == f.data["time_usec"] * 1000 for k, f in enumerate(frames) if k not in bad)
+    assert c["clock_unrepresentable"] == 1 and c["clock_implausible"] == 2
+
+
+def test_tcpin_serves_several_clients_and_an_idle_one_blinds_nothing():
+    src = MavlinkSource("tcpin:127.0.0.1:0")
+    port = src.local_address[1]
+    a, b = packer(sysid=7), packer(sysid=8)
+    try:
+        idle = socket.create_connection(("127.0.0.1", port))         # connects, never sends
+        with idle, socket.create_connection(("127.0.0.1", port)) as c1, \
+                socket.create_connection(("127.0.0.1", port)) as c2:
+            blob1, blob2 = b"".join(a(k) for k in range(40)), b"".join(b(k) for k in range(40))
+            for i in range(0, len(blob1), 29):       # the two byte streams interleave on the wire
+                c1.sendall(blob1[i:i + 29])
+                c2.sendall(blob2[i:i + 29])
+            frames = collect(src, 80)
+            counts = src.counts
+    finally:
+        src.close()
+    by_sys = {s: [f.data["time_boot_ms"] for f in frames if f.data["sysid"] == s] for s in (7, 8)}
+    assert by_sys == {7: [1000 + k for k in range(40)], 8: [1000 + k for k in range(40)]}
+    assert counts["clients"] == 3 and counts["bad_crc"] == counts["bad_prefix_or_garbage"] == 0
+
+
+def test_kernel_drops_are_counted():
+    """A burst into a small socket buffer that nobody reads: what the kernel drops is counted, so
+    received + dropped = sent (Linux, SO_RXQ_OVFL)."""
+    if not sys.platform.startswith("linux"):
+        pytest.skip("the kernel reports drops on Linux only")
+    src, port = udp_source(rcvbuf_bytes=4096)
+    pack = packer(sysid=2)
+    n = 3000
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            for k in range(n):
+                s.sendto(pack(k), ("127.0.0.1", port))
+        time.sleep(0.2)
+        frames = []
+        while chunk := src.poll(0.1):
+            frames += chunk
+        c = src.counts
+    finally:
+        src.close()
+    assert c["kernel_drops"] > 0
+    assert len(frames) + c["kernel_drops"] == n

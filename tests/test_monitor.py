@@ -65,7 +65,7 @@ def run_live(tmp_path, speed=10.0):
 
     rec = McapRecorder(tmp_path / "live.mcap", settings=SETTINGS.to_dict())
     view = RerunView(list(SETTINGS.inputs), list(SETTINGS.outputs), recording_id="live", save_path=tmp_path / "live.rrd")
-    pipe = MonitorPipeline(SETTINGS, [src], recorder=rec, view=view)
+    pipe = MonitorPipeline(SETTINGS, [src], recorder=rec, view=view, keep_estimates=True)
     quiet_since = []
 
     def stop():
@@ -112,7 +112,7 @@ def test_live_verdict_and_adequacy_for_the_roll_sweep(live):
 
 def test_replay_of_the_recording_reproduces_the_live_estimates(live):
     tmp, pipe, _, _ = live
-    replay = MonitorPipeline(SETTINGS, [McapReplaySource(tmp / "live.mcap")])
+    replay = MonitorPipeline(SETTINGS, [McapReplaySource(tmp / "live.mcap")], keep_estimates=True)
     replay.run()
     live_est = {round(e.t_s, 6): e for e in pipe.estimates}
     rep_est = {round(e.t_s, 6): e for e in replay.estimates}
@@ -289,7 +289,7 @@ def test_monitor_publishes_results_on_zenoh(tmp_path):
         port = s.getsockname()[1]
     got = []
     ground = zenoh.open(zenoh_config(listen=[f"tcp/127.0.0.1:{port}"]))     # a second ground station
-    sub = ground.declare_subscriber("livesweep/**", lambda smp: got.append(json.loads(smp.payload.to_bytes())))
+    sub = ground.declare_subscriber("livesweep/estimate", lambda smp: got.append(json.loads(smp.payload.to_bytes())))
     try:
         pub = ZenohPublisher(connect_port=port)
         time.sleep(0.5)

@@ -172,7 +172,7 @@ def cmd_demo(args) -> int:
     port = source.local_address[1]
     log = out_dir / "live.mcap"
     rrd = out_dir / "live.rrd"
-    recorder = McapRecorder(log, settings=settings.to_dict(),
+    recorder = McapRecorder(log, settings=settings.to_dict(), overwrite=True,     # the demo rewrites its own folder
                             metadata={"test_point": {"aircraft": "XV-15", "manoeuvre": "aileron sweeps x2 (simulated)",
                                                      "source": "livesweep demo"}})
     view = RerunView(list(settings.inputs), list(settings.outputs), recording_id="demo",
@@ -368,9 +368,23 @@ def _print_monitor_summary(summary: dict, out=sys.stdout) -> None:
           f"of data in {summary['wall_s']:.1f} s", file=out)
     al = summary["aligner"]
     issues = {k: v for k, v in al.items() if k in ("missing_field", "not_a_number", "late_dropped", "reordered",
-                                                   "wraps", "resets", "samples_invalid") and v}
+                                                   "wraps", "resets", "clock_rejected", "other_system",
+                                                   "samples_skipped", "samples_invalid") and v}
     if issues:
         print(f"  repairs and gaps: {issues}", file=out)
+    counters = summary.get("counters") or {}
+    for src in counters.get("sources", []):
+        received = src.get("received") or {}
+        systems = src.get("by_system") or {}
+        bad = {k: v for k, v in src.items() if k not in ("name", "received", "by_system", "bytes", "records", "samples")
+               and v and not isinstance(v, dict)}
+        gaps = sum((src.get("seq_gaps") or {}).values())
+        print(f"  {src['name']}: {sum(received.values())} frames" + (f" from systems {dict(sorted(systems.items()))}"
+              if systems else "") + (f"; {gaps} lost (sequence gaps)" if gaps else "")
+              + (f"; rejected or repaired: {bad}" if bad else "; nothing rejected"), file=out)
+    pipe = counters.get("pipeline") or {}
+    if pipe.get("analysis_shed"):
+        print(f"  analysis skipped {pipe['analysis_shed']} frames to keep up (all recorded)", file=out)
     for a in summary["adequacy"]:
         band = "-" if a["band"] is None else "%.2f .. %.2f rad/s" % tuple(a["band"])
         print(f"  {a['output'] + '/' + a['input']:12s} adequate over {100 * a['fraction']:3.0f}% of the band ({band})", file=out)
@@ -379,6 +393,35 @@ def _print_monitor_summary(summary: dict, out=sys.stdout) -> None:
               file=out)
     if summary.get("recorded"):
         print(f"  recorded {sum(summary['recorded'].values())} messages", file=out)
+
+
+def _read_signing_key(path: str | None) -> bytes | None:
+    """The 32-byte MAVLink signing key in ``path`` (one line naming the file when it cannot be used)."""
+    if not path:
+        return None
+    try:
+        key = Path(path).read_bytes()
+    except OSError as e:
+        raise ConfigError(f"--signing-key-file {path!r}: cannot be read ({e.strerror or e})") from None
+    if len(key) != 32:
+        raise ConfigError(f"--signing-key-file {path!r}: holds {len(key)} bytes; a MAVLink 2 signing key is 32 bytes "
+                          "(e.g. the SHA-256 of a passphrase)")
+    return key
+
+
+def _stop_on_signals(pipe) -> None:
+    """SIGTERM (systemd, docker stop, timeout), SIGHUP (a closed terminal) and SIGINT (Ctrl-C) finish
+    the recording like the end of --duration; a second signal interrupts at once."""
+    import signal
+
+    def handler(signum, frame):
+        if pipe.stop_requested:
+            raise KeyboardInterrupt
+        print(f"monitor: {signal.Signals(signum).name}: finishing the recording", file=sys.stderr, flush=True)
+        pipe.request_stop()
+
+    for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
+        signal.signal(sig, handler)
 
 
 def cmd_monitor(args) -> int:
@@ -393,12 +436,15 @@ def cmd_monitor(args) -> int:
     settings = _monitor_settings(args)
     if args.record:
         _check_out_path(args.record)
+        if Path(args.record).exists() and not args.force:
+            raise ConfigError(f"--record {args.record!r} exists: a recording is never overwritten; choose another "
+                              "name or pass --force")
+    key = _read_signing_key(args.signing_key_file)
     sources, publisher = [], None
     try:
         for url in args.mavlink or []:
             from livesweep.telemetry.mavlink_in import MavlinkSource
 
-            key = Path(args.signing_key_file).read_bytes() if args.signing_key_file else None
             sources.append(MavlinkSource(url, signing_key=key))
         if args.zenoh:
             from livesweep.telemetry.zenoh_io import ZenohPublisher, ZenohSource, zenoh_config
@@ -407,15 +453,17 @@ def cmd_monitor(args) -> int:
             sources.append(ZenohSource(args.zenoh, config=cfg, listen_port=args.zenoh_listen))
             if args.zenoh_publish:
                 publisher = ZenohPublisher(config=cfg, connect_port=args.zenoh_listen)
-        recorder = McapRecorder(args.record, settings=settings.to_dict(),
+        recorder = McapRecorder(args.record, settings=settings.to_dict(), overwrite=args.force,
                                 metadata={"test_point": {"source": "livesweep monitor"}}) if args.record else None
         view = _view(args, settings, "live")
     except BaseException:
         for src in sources:
             src.close()
         raise
-    pipe = MonitorPipeline(settings, sources, recorder=recorder, view=view, publisher=publisher)
-    where = [f"mavlink {u}" for u in args.mavlink or []] + ([f"zenoh {args.zenoh}"] if args.zenoh else [])
+    pipe = MonitorPipeline(settings, sources, recorder=recorder, view=view, publisher=publisher, keep_estimates=False)
+    _stop_on_signals(pipe)
+    where = [f"mavlink {getattr(s, 'description', s.url)}" for s in sources if hasattr(s, "url")]
+    where += [f"zenoh {args.zenoh}"] if args.zenoh else []
     print(f"monitor: listening on {', '.join(where)}; Ctrl-C to stop", flush=True)
     try:
         summary = pipe.run(duration_s=args.duration)
@@ -489,6 +537,7 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--zenoh-listen", type=int, help="Zenoh TCP port on 127.0.0.1 (default: no listener)")
     m.add_argument("--zenoh-publish", action="store_true", help="publish live results under livesweep/...")
     m.add_argument("--record", metavar="FILE.mcap", help="record every message and the live results")
+    m.add_argument("--force", action="store_true", help="overwrite an existing --record file")
     m.add_argument("--duration", type=_positive_float, help="stop after this many seconds (default: Ctrl-C)")
     _add_monitor_options(m)
     m.set_defaults(func=cmd_monitor)

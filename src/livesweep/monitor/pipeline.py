@@ -1,18 +1,32 @@
 """The live (and replay) monitor: sources -> recorder -> aligner -> online estimator -> view.
 
-One loop polls every source, records every frame as received, aligns the channel map's signals
-onto the estimator's grid, feeds the sliding-window estimator and, at fixed ticks of the
-signals' clock (``update_period_s``), computes the estimate, the excitation status and alerts,
-and sends them to the Rerun view, the Zenoh publisher and the recording.
+Two threads. The ingest thread (:mod:`livesweep.monitor.ingest`) polls every source and records
+every frame as received; it never waits for the analysis. The caller's thread takes the frames
+the channel map needs, aligns them onto the estimator's grid, feeds the sliding-window estimator
+and, at fixed ticks of the signals' clock (``update_period_s``), computes the estimate, the
+excitation status and alerts, and sends them to the Rerun view, the Zenoh publisher and the
+recording. When a live link brings more than the analysis can take, the analysis skips frames
+(counted in ``analysis_shed``, a gap to the estimator); the recording keeps every one.
 
 Ticks are on the data's clock, never the wall clock, and the estimator is fed exactly up to each
 tick, so the estimates depend only on the frames: replaying a recording reproduces the live
 estimates (a test checks equality to 1e-9).
+
+Every counter the sources, the aligner and the pipeline keep (frames per type and system, bad
+CRC, garbage, unknown messages, unsigned and bad signatures, sequence gaps, kernel drops, clock
+anomalies, frames shed) is recorded about once a second on ``/livesweep/link``, raised as a
+``link`` alert when it grows (view, ``/livesweep/alert``, Zenoh), printed in the summary and
+written into the recording's ``livesweep.counters`` metadata when it is closed.
+
+Memory is bounded for any flight length: the aligner by the window, the estimator by design, the
+estimates kept for inspection by ``keep_estimates``, the hand-over queue by ``queue_limit``.
 """
 
 from __future__ import annotations
 
 import math
+import sys
+import threading
 import time
 from collections import deque
 from dataclasses import asdict, dataclass, field
@@ -20,14 +34,35 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from livesweep.errors import ConfigError
-from livesweep.spectral.excitation import ExcitationMonitor
+from livesweep.monitor.ingest import FrameQueue, Ingest
+from livesweep.spectral.excitation import Alert, ExcitationMonitor
 from livesweep.spectral.online import OnlineSpectralEstimator
 from livesweep.telemetry.align import GridAligner
 
-__all__ = ["MonitorSettings", "Estimate", "MonitorPipeline"]
+__all__ = ["MonitorSettings", "Estimate", "MonitorPipeline", "LINK_ANOMALIES"]
 
 PROCESS_EVERY_S = 0.02        # align and estimate at most this often [s of wall time] ...
 PROCESS_EVERY_FRAMES = 500    # ... unless this many frames are waiting
+REPORT_EVERY_S = 1.0          # link counters recorded and checked for alerts this often [s of wall time]
+QUEUE_LIMIT_FRAMES = 50_000   # frames waiting for the analysis at most (about 50 MB)
+SWITCH_INTERVAL_S = 0.001     # the GIL changes hands at least this often while the monitor runs
+
+#: Counters whose growth is a ``link`` alert: (where, key, words).
+LINK_ANOMALIES = (
+    ("source", "bad_crc", "bad CRC"), ("source", "bad_prefix_or_garbage", "garbage"),
+    ("source", "bad_other", "undecodable"), ("source", "unknown_message", "unknown message"),
+    ("source", "rejected_unsigned", "unsigned (rejected)"), ("source", "bad_signature", "bad signature"),
+    ("source", "clock_unrepresentable", "unrepresentable time stamp"),
+    ("source", "clock_implausible", "implausible time stamp"), ("source", "kernel_drops", "dropped by the kernel"),
+    ("source", "malformed", "malformed JSON"), ("source", "non_object", "not a JSON object"),
+    ("source", "bad_stamp", "bad stamp"), ("source", "dropped_queue_full", "dropped (queue full)"),
+    ("source", "clients_refused", "TCP client refused"),
+    ("pipeline", "analysis_shed", "skipped by the analysis (recorded)"),
+    ("aligner", "clock_rejected", "sample with an implausible stamp"), ("aligner", "resets", "clock reset"),
+    ("aligner", "other_system", "frame of another system"), ("aligner", "samples_skipped", "grid sample skipped"),
+    ("aligner", "late_dropped", "late sample"), ("aligner", "not_a_number", "non-numeric value"),
+    ("aligner", "missing_field", "missing field"),
+)
 
 
 @dataclass(frozen=True)
@@ -105,11 +140,22 @@ class Estimate:
 
 @dataclass
 class _Totals:
-    frames: int = 0
+    frames: int = 0                 # frames received from the sources (all recorded, when recording)
+    analysed: int = 0               # frames the analysis took
     blocks: int = 0
     estimates: int = 0
+    ticks_skipped: int = 0          # estimate ticks skipped over a jump of the data clock
     wall_s: float = 0.0
-    latency_s: list = field(default_factory=list)
+    latency_s: deque = field(default_factory=lambda: deque(maxlen=10_000))
+
+
+def _source_name(src) -> str:
+    """How a source names itself in counters: its bound url, path or key expression."""
+    for attr in ("description", "url", "path", "key_expr"):
+        v = getattr(src, attr, None)
+        if v is not None:
+            return str(v)
+    return type(src).__name__
 
 
 class MonitorPipeline:
@@ -122,12 +168,17 @@ class MonitorPipeline:
     recorder : McapRecorder, optional
     view : RerunView, optional
     publisher : ZenohPublisher, optional
-    keep_estimates : bool
-        Keep every Estimate in ``self.estimates`` (tests, replay comparison).
+    keep_estimates : bool or int
+        Estimates kept in ``self.estimates`` for inspection: True all (tests, replay comparisons
+        of a bounded log), False none, an int the newest that many (the default 100; a flight of
+        hours at 5 estimates/s would otherwise keep gigabytes).
+    queue_limit : int
+        Frames that may wait for the analysis; beyond it a live source's frames are skipped by
+        the analysis (recorded all the same) and counted in ``analysis_shed``.
     """
 
     def __init__(self, settings: MonitorSettings, sources, *, recorder=None, view=None, publisher=None,
-                 keep_estimates: bool = True):
+                 keep_estimates: bool | int = 100, queue_limit: int = QUEUE_LIMIT_FRAMES):
         self.s = settings
         for n in (*settings.inputs, *settings.outputs, *(settings.references or ())):
             if n not in settings.signals:
@@ -135,7 +186,7 @@ class MonitorPipeline:
         self.sources = list(sources)
         self.recorder, self.view, self.publisher = recorder, view, publisher
         self.names = tuple(dict.fromkeys((*settings.inputs, *settings.outputs, *(settings.references or ()))))
-        self.aligner = GridAligner(settings.signals, self.names, settings.sample_rate_hz)
+        self.aligner = GridAligner(settings.signals, self.names, settings.sample_rate_hz, max_fill_s=settings.window_s)
         kw = {} if settings.segment_s is None else {"segment_s": settings.segment_s}
         self.estimator = OnlineSpectralEstimator(self.names, settings.inputs, settings.outputs,
                                                  settings.sample_rate_hz, settings.band_rad_s,
@@ -145,8 +196,13 @@ class MonitorPipeline:
                                             settings.sample_rate_hz, saturation_limits=settings.saturation_limits,
                                             required_pairs=settings.required_pairs)
         self.keep_estimates = keep_estimates
-        self.estimates: list[Estimate] = []
+        if keep_estimates is True:
+            self.estimates: list[Estimate] | deque = []
+        else:
+            self.estimates = deque(maxlen=max(int(keep_estimates), 0))
+        self.queue_limit = int(queue_limit)
         self.totals = _Totals()
+        self.analysis_shed = 0
         self._fed_until: float | None = None         # data time fed to the estimator
         self._next_tick: float | None = None
         recent = int(round(30.0 * settings.sample_rate_hz))
@@ -154,12 +210,30 @@ class MonitorPipeline:
         self._seen_gaps = self._seen_lost = 0
         self._last_view_t = -math.inf
         self._t_first: float | None = None
+        self._t_data: float | None = None             # newest data time analysed [s]
         self.last_status = None
         self._oldest_unlogged: float | None = None
+        self._stop = threading.Event()
+        self._ingest: Ingest | None = None
+        self._t_start = time.monotonic()
+        self._last_report = -math.inf
+        self._seen_anomalies: dict[str, int] = {}
+        self._seen_systems: set = set()
+        self.alerts_raised = 0
+
+    def request_stop(self) -> None:
+        """Stop at the next turn of the loop (safe from a signal handler or another thread)."""
+        self._stop.set()
+
+    @property
+    def stop_requested(self) -> bool:
+        """True once :meth:`request_stop` was called."""
+        return self._stop.is_set()
 
     # -- the loop ---------------------------------------------------------------------------
     def run(self, duration_s: float | None = None, stop=None, clock=time.monotonic) -> dict:
-        """Poll the sources until they finish, ``duration_s`` of wall time passes or ``stop()`` is true.
+        """Run until the sources finish, ``duration_s`` of wall time passes, ``stop()`` is true or
+        :meth:`request_stop` is called.
 
         Returns
         -------
@@ -167,62 +241,84 @@ class MonitorPipeline:
             Summary: frames, estimates, counts per source and of the aligner, final verdict.
         """
         t_start = clock()
-        timeout = 0.02 if len(self.sources) > 1 else 0.05
+        self._t_start = time.monotonic()
+        live = any(getattr(src, "live", False) for src in self.sources)
+        queue = FrameQueue(self.queue_limit, shed=live)
+        wanted = {spec.topic for spec in self.aligner.specs.values()}
+        ingest = self._ingest = Ingest(self.sources, queue, recorder=self.recorder, wanted_topics=wanted)
+        switch = sys.getswitchinterval()
+        sys.setswitchinterval(min(switch, SWITCH_INTERVAL_S))   # the ingest thread gets the GIL promptly
+        ingest.start()
         pending = 0
         last_process = time.monotonic()
         try:
             while True:
-                got = 0
-                for src in self.sources:
-                    frames = src.poll(timeout_s=timeout)
-                    if not frames:
-                        continue
-                    got += len(frames)
-                    if self._oldest_unlogged is None:
-                        self._oldest_unlogged = time.monotonic()
-                    if self.recorder is not None:
-                        self.recorder.record(frames)
-                    for f in frames:
-                        self.aligner.push(f)
-                self.totals.frames += got
-                pending += got
+                frames = queue.get(timeout_s=0.02)
+                for f in frames:
+                    self.aligner.push(f)
+                self.totals.analysed += len(frames)
+                self.totals.frames = ingest.received
+                self.analysis_shed = queue.shed
+                if frames and self._oldest_unlogged is None:
+                    self._oldest_unlogged = time.monotonic()
+                pending += len(frames)
                 # align and estimate in batches: per-call costs (array conversions, Rerun calls) would
                 # otherwise be paid for every few frames a live socket delivers
                 now = time.monotonic()
-                finished = all(s.finished for s in self.sources)
-                if pending and (pending >= PROCESS_EVERY_FRAMES or now - last_process >= PROCESS_EVERY_S or finished):
+                ended = queue.ended
+                if pending and (pending >= PROCESS_EVERY_FRAMES or now - last_process >= PROCESS_EVERY_S or ended):
                     self._process(now)
                     pending = 0
                     last_process = now
-                if self.recorder is not None:
-                    self.recorder.maybe_flush()
-                if finished:
+                if now - self._last_report >= REPORT_EVERY_S:
+                    self._report(now)
+                ingest.check()
+                if ended or self._stop.is_set():
                     break
                 if duration_s is not None and clock() - t_start >= duration_s:
                     break
                 if stop is not None and stop():
                     break
-            if pending:
-                self._process(time.monotonic())
         finally:
+            sys.setswitchinterval(switch)
+            ingest.stop(drain=live)
+            queue.close()
+            ingest.join()
+            self.totals.frames = ingest.received
+            self.analysis_shed = queue.shed
             self.totals.wall_s = clock() - t_start
-            self.close()
+            try:
+                if pending:
+                    self._process(time.monotonic())
+                self._report(time.monotonic(), final=True)
+            finally:
+                self.close()
+            ingest.check()
         return self.summary()
 
     def _process(self, t_rx: float) -> None:
-        block = self.aligner.pop_ready()
-        if block is None:
-            return
+        """Every block the aligner has ready, through the estimator tick by tick."""
+        while (block := self.aligner.pop_ready()) is not None:
+            self._process_block(block, t_rx)
+
+    def _process_block(self, block, t_rx: float) -> None:
         self.totals.blocks += 1
         fs = self.s.sample_rate_hz
         n = block.values.shape[1]
         t = block.t0_s + np.arange(n) / fs
+        self._t_data = float(t[-1])
         if self.view is not None:
             self.view.log_timeseries(t, list(self.names), block.values,
                                      ["output" if x in self.s.outputs else "input" for x in self.names])
         if self._next_tick is None:
             self._next_tick = block.t0_s + self.s.update_period_s
             self._t_first = block.t0_s
+        elif self._next_tick < block.t0_s - self.s.update_period_s:
+            # the data clock jumped (a long gap, or the aligner skipped a jump): no estimates for ticks
+            # before this block, whose samples are gone
+            skip = int(math.floor((block.t0_s - self._next_tick) / self.s.update_period_s))
+            self._next_tick += skip * self.s.update_period_s
+            self.totals.ticks_skipped += skip
         # feed the estimator tick by tick so estimates depend on data time only
         start = 0
         while start < n:
@@ -256,7 +352,7 @@ class MonitorPipeline:
         est = Estimate(t_s, frs.omega, frs.coherence, mag, phase, frs.conditioned, status, res.n_segments)
         self.totals.estimates += 1
         self.last_status = status
-        if self.keep_estimates:
+        if self.keep_estimates is not False:
             self.estimates.append(est)
         rows = [{"output": p.output, "input": p.input, "band": p.adequate_band_rad_s, "fraction": p.fraction}
                 for p in status.pairs]
@@ -272,8 +368,75 @@ class MonitorPipeline:
         payload = self._payload(est, rows)
         if self.publisher is not None:
             self.publisher.publish("estimate", payload)
-        if self.recorder is not None and self.totals.estimates % max(1, self.s.results_every) == 0:
-            self.recorder.record_result("estimate", payload, log_time_ns=time.time_ns())
+        if self.recorder is not None:
+            for a in status.alerts:
+                self._record_alert(t_s, a)
+            if self.totals.estimates % max(1, self.s.results_every) == 0:
+                self.recorder.record_result("estimate", payload, log_time_ns=time.time_ns())
+
+    def _record_alert(self, t_s: float | None, alert: Alert) -> None:
+        self.alerts_raised += 1
+        if self.recorder is not None:
+            self.recorder.record_result("alert", {"t_s": t_s, "kind": alert.kind, "message": alert.message,
+                                                  "value": float(alert.value)}, log_time_ns=time.time_ns())
+
+    # -- link counters ------------------------------------------------------------------------
+    def counters(self) -> dict:
+        """Every counter now: per source, of the aligner and of the pipeline."""
+        ingest = self._ingest
+        return {
+            "sources": [{"name": _source_name(src), **src.counts} for src in self.sources],
+            "aligner": dict(self.aligner.counts),
+            "pipeline": {"frames_received": self.totals.frames, "frames_analysed": self.totals.analysed,
+                         "analysis_shed": self.analysis_shed, "ticks_skipped": self.totals.ticks_skipped,
+                         "drained_at_stop": 0 if ingest is None else ingest.drained,
+                         "bad_publish_time": 0 if self.recorder is None else self.recorder.bad_publish_time},
+        }
+
+    def _anomalies(self, c: dict) -> dict[str, int]:
+        out: dict[str, int] = {}
+        for where, key, _words in LINK_ANOMALIES:
+            if where == "source":
+                v = sum(int(s.get(key, 0) or 0) for s in c["sources"] if isinstance(s.get(key, 0), (int, float)))
+            else:
+                v = int(c[where].get(key, 0))
+            out[key] = v
+        return out
+
+    def _report(self, now: float, final: bool = False) -> None:
+        """Record the counters on ``/livesweep/link`` and raise a ``link`` alert for what grew."""
+        self._last_report = now
+        c = self.counters()
+        counts = self._anomalies(c)
+        grew = {k: v - self._seen_anomalies.get(k, 0) for k, v in counts.items() if v > self._seen_anomalies.get(k, 0)}
+        self._seen_anomalies = counts
+        systems = {str(k) for s in c["sources"] for k in (s.get("by_system") or {})}
+        new_systems = sorted(systems - self._seen_systems) if self._seen_systems else []
+        self._seen_systems |= systems
+        words = {key: w for _, key, w in LINK_ANOMALIES}
+        alerts = []
+        if grew:
+            text = ", ".join(f"{n} {words[k]}" for k, n in grew.items())
+            alerts.append(Alert("link", f"link: {text} in the last {REPORT_EVERY_S:g} s (counted, see the summary)",
+                                float(sum(grew.values()))))
+        if new_systems:
+            alerts.append(Alert("link", f"link: another system on the link (system id {', '.join(new_systems)}): "
+                                "recorded, but only the first system of each message type is analysed",
+                                float(len(new_systems))))
+        for a in alerts:
+            self._record_alert(self._t_data, a)
+            if self.view is not None:
+                self.view.log_alerts(self._t_data if self._t_data is not None else 0.0, [(a.kind, a.message)])
+            if self.publisher is not None:
+                self.publisher.publish("alert", {"t_s": self._t_data, "kind": a.kind, "message": a.message})
+        if self.recorder is not None:
+            self.recorder.record_result("link", {"t_s": self._t_data, "wall_s": round(now - self._t_start, 3),
+                                                 "frames_recorded": self.totals.frames,
+                                                 "analysis_shed": self.analysis_shed,
+                                                 "sources": c["sources"], "aligner": c["aligner"]},
+                                        log_time_ns=time.time_ns())
+            if final:
+                self.recorder.set_counters(c)
 
     def _payload(self, est: Estimate, rows) -> dict:
         st = est.status
@@ -297,6 +460,7 @@ class MonitorPipeline:
 
     # -- end --------------------------------------------------------------------------------
     def close(self) -> None:
+        """Close sources, recording (finished), view and publisher."""
         for src in self.sources:
             try:
                 src.close()
@@ -318,6 +482,8 @@ class MonitorPipeline:
             "data_s": None if self._next_tick is None else round(self._next_tick - self.s.update_period_s - self._t_first, 3),
             "aligner": dict(self.aligner.counts),
             "sources": [src.counts for src in self.sources],
+            "counters": self.counters(),
+            "alerts_recorded": self.alerts_raised,
             "recorded": None if self.recorder is None else dict(self.recorder.message_counts),
             "verdict": None if last is None else last.verdict,
             "reasons": [] if last is None else list(last.reasons),

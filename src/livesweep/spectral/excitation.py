@@ -11,7 +11,8 @@ input samples received since the previous update) into an :class:`ExcitationStat
 * a verdict: ``WAIT`` until the window holds ``min_n_eff`` equivalent averages (coherence from one
   or two segments is ~1 whatever the data, method.md §2.5), then ``GO`` when every required pair is
   adequate over at least ``required_fraction`` of the band, else ``NO-GO``;
-* alerts: ``coherence_collapse``, ``input_correlation``, ``saturation``, ``data_gap``, ``packet_loss``.
+* alerts: ``coherence_collapse``, ``input_correlation``, ``saturation``, ``data_gap``, ``packet_loss``;
+  the monitor adds ``link`` (link and clock counters that grew, another system on the link).
 
 Fractions of the band are measured in log frequency (decades), as a Bode plot shows them: each
 point of the uniform chirp-z grid counts for the log-width of its cell.
@@ -33,7 +34,7 @@ from livesweep.spectral.response import FrequencyResponse
 __all__ = ["Alert", "PairStatus", "ExcitationStatus", "ExcitationMonitor", "SweepTrack", "track_sweep",
            "log_band_weights", "ALERT_KINDS"]
 
-ALERT_KINDS = ("coherence_collapse", "input_correlation", "saturation", "data_gap", "packet_loss")
+ALERT_KINDS = ("coherence_collapse", "input_correlation", "saturation", "data_gap", "packet_loss", "link")
 
 
 @dataclass(frozen=True)

@@ -3,23 +3,94 @@
 The file is written directly (not atomically: a recording must survive the process being
 killed) and the open chunk is closed and handed to the OS every ``flush_interval_s`` of wall
 time, so a kill loses at most that much (default 1 s) plus what the OS had not written.
-Ctrl-C or ``--duration`` ends with :meth:`McapRecorder.close`, which finishes the file (summary,
-index) so any MCAP reader opens it.
+Ctrl-C, SIGTERM, SIGHUP or ``--duration`` end with :meth:`McapRecorder.close`, which finishes the
+file (summary, index) so any MCAP reader opens it.
+
+An existing file is never replaced unless ``overwrite=True`` (``--force``), and the file is locked
+while it is written, so two monitors cannot record into one file. The recorder may be called from
+two threads (the monitor's ingest thread records frames, its analysis thread records results): a
+lock serialises the writes.
+
+Results go on ``/livesweep/<name>`` channels, each with a full JSON Schema (:data:`RESULT_SCHEMAS`)
+so Foxglove and other viewers offer their fields for plotting.
 """
 
 from __future__ import annotations
 
 import json
+import threading
 import time
 
 from livesweep import __version__
+from livesweep.telemetry.clock import UINT64_NS_MAX
 from livesweep.telemetry.frames import Frame
 from livesweep.telemetry.mcap_log import McapLogWriter
 
-__all__ = ["McapRecorder", "RESULT_PREFIX"]
+__all__ = ["McapRecorder", "RESULT_PREFIX", "RESULT_SCHEMAS", "COUNTERS_METADATA"]
 
 RESULT_PREFIX = "/livesweep"
+#: Metadata record with the final link and pipeline counters (JSON text per source), written on close.
+COUNTERS_METADATA = "livesweep.counters"
 _GENERIC = {"type": "object", "description": "JSON object as received"}
+
+_COUNT = {"type": "integer", "minimum": 0}
+_COUNT_MAP = {"type": "object", "additionalProperties": _COUNT}
+
+#: JSON Schemas of livesweep's own channels (``/livesweep/<name>``).
+RESULT_SCHEMAS: dict[str, dict] = {
+    "link": {
+        "type": "object",
+        "description": "Link and pipeline counters (cumulative since the monitor started), about once a second",
+        "properties": {
+            "t_s": {"type": ["number", "null"], "description": "data time of the newest analysed sample [s]"},
+            "wall_s": {"type": "number", "description": "seconds since the monitor started"},
+            "frames_recorded": _COUNT,
+            "analysis_shed": {**_COUNT, "description": "frames the analysis skipped to keep up (recorded all the same)"},
+            "sources": {"type": "array", "items": {"type": "object", "properties": {
+                "name": {"type": "string"},
+                "received": _COUNT_MAP, "by_system": _COUNT_MAP, "seq_gaps": _COUNT_MAP,
+                "bad_crc": _COUNT, "bad_prefix_or_garbage": _COUNT, "unknown_message": _COUNT,
+                "rejected_unsigned": _COUNT, "bad_signature": _COUNT, "replayed_signature": _COUNT,
+                "clock_unrepresentable": _COUNT, "clock_implausible": _COUNT, "kernel_drops": _COUNT,
+                "malformed": _COUNT, "non_object": _COUNT, "bad_stamp": _COUNT, "dropped_queue_full": _COUNT,
+            }, "additionalProperties": True}},
+            "aligner": {**_COUNT_MAP, "description": "aligner counters (clock rejections, resets, gaps, other systems)"},
+        },
+        "required": ["wall_s", "frames_recorded", "analysis_shed", "sources", "aligner"],
+    },
+    "alert": {
+        "type": "object",
+        "description": "One alert raised by the live monitor",
+        "properties": {
+            "t_s": {"type": ["number", "null"], "description": "data time [s]"},
+            "kind": {"type": "string"},
+            "message": {"type": "string"},
+            "value": {"type": "number"},
+        },
+        "required": ["kind", "message"],
+    },
+    "estimate": {
+        "type": "object",
+        "description": "One live estimate: coherence per pair over the frequency grid, adequacy and verdict",
+        "properties": {
+            "t_s": {"type": "number", "description": "data time [s]"},
+            "n_segments": _COUNT,
+            "conditioned": {"type": "boolean"},
+            "omega_rad_s": {"type": "array", "items": {"type": "number"}},
+            "coherence": {"type": "object", "description": "output/input -> coherence over omega_rad_s",
+                          "additionalProperties": {"type": "array", "items": {"type": ["number", "null"]}}},
+            "adequacy": {"type": "array", "items": {"type": "object", "properties": {
+                "output": {"type": "string"}, "input": {"type": "string"},
+                "band": {"type": ["array", "null"], "items": {"type": "number"}},
+                "fraction": {"type": "number"}}}},
+            "verdict": {"type": "string", "enum": ["WAIT", "GO", "NO-GO"]},
+            "reasons": {"type": "array", "items": {"type": "string"}},
+            "alerts": {"type": "array", "items": {"type": "object", "properties": {
+                "kind": {"type": "string"}, "message": {"type": "string"}}}},
+        },
+        "required": ["t_s", "omega_rad_s", "coherence", "verdict"],
+    },
+}
 
 
 def _schema_for(topic: str) -> tuple[str, dict]:
@@ -47,22 +118,32 @@ class McapRecorder:
         settings the live results came from).
     metadata : dict of str -> dict, optional
         MCAP metadata records (test point: aircraft, condition, manoeuvre, notes).
+    overwrite : bool
+        Replace an existing file (``--force``); by default an existing file is an error.
+
+    Raises
+    ------
+    LogFormatError
+        If ``path`` exists and ``overwrite`` is False, or another process is writing it.
     """
 
     def __init__(self, path, *, flush_interval_s: float = 1.0, settings: dict | None = None,
-                 metadata: dict | None = None, clock=time.monotonic):
+                 metadata: dict | None = None, clock=time.monotonic, overwrite: bool = False):
         self.writer = McapLogWriter(path, library=f"livesweep {__version__} recorder", atomic=False,
-                                    chunk_size=256 * 1024, flush_every=0)
+                                    chunk_size=256 * 1024, flush_every=0, overwrite=overwrite)
         self.flush_interval_s = flush_interval_s
         self._clock = clock
         self._last_flush = clock()
+        self._lock = threading.Lock()
         self.path = self.writer.path
+        self.bad_publish_time = 0
         for name, values in (metadata or {}).items():
             self.writer.add_metadata(name, values)
         if settings is not None:
             self.writer.add_attachment("livesweep_settings.json", json.dumps(settings, indent=1).encode(),
                                        "application/json")
         self._known: set[str] = set()
+        self._counters: dict[str, str] | None = None
 
     def _channel(self, topic: str, schema: tuple[str, dict] | None = None) -> None:
         if topic not in self._known:
@@ -71,20 +152,40 @@ class McapRecorder:
             self._known.add(topic)
 
     def record(self, frames: list[Frame]) -> None:
-        """Write received frames (log_time = receive time, publish_time = vehicle time or receive time)."""
-        for f in frames:
-            self._channel(f.topic)
-            self.writer.write(f.topic, f.data, log_time_ns=f.receive_ns,
-                              publish_time_ns=f.vehicle_ns if f.vehicle_ns is not None and f.vehicle_ns >= 0 else None)
-        self.maybe_flush()
+        """Write received frames (log_time = receive time, publish_time = vehicle time or receive time).
+
+        A vehicle time an MCAP record cannot hold falls back to the receive time (counted in
+        :attr:`bad_publish_time`; the sources normally catch it first): a frame is never lost to
+        its stamp.
+        """
+        with self._lock:
+            for f in frames:
+                self._channel(f.topic)
+                pub = f.vehicle_ns
+                if pub is not None and not 0 <= pub <= UINT64_NS_MAX:
+                    self.bad_publish_time += 1
+                    pub = None
+                self.writer.write(f.topic, f.data, log_time_ns=f.receive_ns, publish_time_ns=pub)
+            self._maybe_flush()
 
     def record_result(self, name: str, payload: dict, log_time_ns: int) -> None:
-        """Write a live result on ``/livesweep/<name>``."""
+        """Write a live result on ``/livesweep/<name>`` (schema from :data:`RESULT_SCHEMAS`)."""
         topic = f"{RESULT_PREFIX}/{name}"
-        self._channel(topic, (f"livesweep.{name}", {"type": "object", "description": f"livesweep live {name}"}))
-        self.writer.write(topic, payload, log_time_ns=log_time_ns)
+        schema = RESULT_SCHEMAS.get(name, {"type": "object", "description": f"livesweep live {name}"})
+        with self._lock:
+            self._channel(topic, (f"livesweep.{name}", schema))
+            self.writer.write(topic, payload, log_time_ns=log_time_ns)
+
+    def set_counters(self, counters: dict) -> None:
+        """The final counters, written as the :data:`COUNTERS_METADATA` record when the file is closed."""
+        self._counters = {str(k): json.dumps(v, sort_keys=True, default=str) for k, v in counters.items()}
 
     def maybe_flush(self) -> None:
+        """Hand the open chunk to the OS if ``flush_interval_s`` has passed since the last flush."""
+        with self._lock:
+            self._maybe_flush()
+
+    def _maybe_flush(self) -> None:
         now = self._clock()
         if now - self._last_flush >= self.flush_interval_s:
             self.writer.flush()
@@ -96,6 +197,9 @@ class McapRecorder:
 
     def close(self):
         """Finish the file (idempotent)."""
-        if not self.writer.closed:
-            return self.writer.close()
-        return self.writer.path
+        with self._lock:
+            if not self.writer.closed:
+                if self._counters is not None:
+                    self.writer.add_metadata(COUNTERS_METADATA, self._counters)
+                return self.writer.close()
+            return self.writer.path

@@ -25,6 +25,9 @@ class McapReplaySource:
         Replay livesweep's own ``/livesweep/...`` results too (default no: they are recomputed).
     """
 
+    #: A file: the monitor reads it at its own pace and never sheds analysis load.
+    live = False
+
     def __init__(self, path, *, speed: float = 0.0, include_results: bool = False,
                  clock=time.monotonic, sleep=time.sleep):
         if not (speed == 0 or speed > 0) or (isinstance(speed, float) and math.isnan(speed)):

@@ -1,0 +1,177 @@
+"""The monitor's edge: one thread reads every source and records every frame, analysis never holds it up.
+
+:class:`Ingest` polls the sources, writes each frame to the MCAP recorder as soon as it is read and
+offers the frames the analysis needs to a :class:`FrameQueue`. The analysis (aligner, estimator,
+view) runs on the caller's thread and takes frames from the queue at its own pace:
+
+* from a **live** source (``source.live`` is True: a MAVLink link, a Zenoh session) the queue never
+  makes the ingest wait: frames that do not fit are dropped *for the analysis only* and counted
+  (``analysis_shed``); they are in the recording all the same;
+* from a **file** (a replay, a tlog, anything without ``live``) the ingest waits for room, so the
+  analysis sees every frame and a replay reproduces the live estimates.
+
+On stop, the frames still waiting in a live source (its socket buffer, its parser) are read and
+recorded before the thread ends (for at most ``drain_timeout_s``), so nothing that reached the
+machine is lost to the stop. An exception in the thread (a full disk) ends it and is re-raised by
+:meth:`Ingest.check` on the analysis thread.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+
+__all__ = ["FrameQueue", "Ingest"]
+
+
+class FrameQueue:
+    """A bounded hand-over of frame lists from the ingest thread to the analysis.
+
+    Parameters
+    ----------
+    limit : int
+        Frames held at most.
+    shed : bool
+        True: :meth:`put` drops what does not fit (counted in :attr:`shed`); False: it waits for room.
+    """
+
+    def __init__(self, limit: int, *, shed: bool):
+        self.limit = int(limit)
+        self.shedding = bool(shed)
+        self.shed = 0
+        self._items: deque[list] = deque()
+        self._n = 0
+        self._closed = False
+        self._cv = threading.Condition()
+
+    def put(self, frames: list) -> None:
+        """Queue ``frames`` (a list; dropped and counted beyond the limit when shedding)."""
+        if not frames:
+            return
+        with self._cv:
+            if self.shedding:
+                room = self.limit - self._n
+                if room < len(frames):
+                    self.shed += len(frames) - max(room, 0)
+                    frames = frames[:max(room, 0)]
+                    if not frames:
+                        return
+            else:
+                while self._n + len(frames) > self.limit and self._n and not self._closed:
+                    self._cv.wait(0.1)
+                if self._closed:
+                    return
+            self._items.append(frames)
+            self._n += len(frames)
+            self._cv.notify_all()
+
+    def get(self, timeout_s: float) -> list:
+        """Every queued frame (possibly none after ``timeout_s`` [s])."""
+        with self._cv:
+            if not self._items and not self._closed:
+                self._cv.wait(timeout_s)
+            out = [f for batch in self._items for f in batch]
+            self._items.clear()
+            self._n = 0
+            self._cv.notify_all()
+            return out
+
+    def close(self) -> None:
+        """No more frames will come; a waiting :meth:`put` gives up."""
+        with self._cv:
+            self._closed = True
+            self._cv.notify_all()
+
+    @property
+    def ended(self) -> bool:
+        """Closed and empty: the analysis has everything it will get."""
+        with self._cv:
+            return self._closed and not self._items
+
+    def __len__(self) -> int:
+        return self._n
+
+
+class Ingest(threading.Thread):
+    """Reads the sources, records every frame, hands the wanted ones to a :class:`FrameQueue`.
+
+    Parameters
+    ----------
+    sources : list of frames.Source
+    queue : FrameQueue
+    recorder : McapRecorder, optional
+    wanted_topics : set of str, optional
+        Topics the analysis uses; other frames are recorded but not queued (None: all).
+    drain_timeout_s : float
+        On stop, read live sources until they are empty, for at most this long [s].
+    """
+
+    def __init__(self, sources, queue: FrameQueue, *, recorder=None, wanted_topics=None,
+                 drain_timeout_s: float = 5.0):
+        super().__init__(name="livesweep-ingest", daemon=True)
+        self.sources = list(sources)
+        self.queue = queue
+        self.recorder = recorder
+        self.wanted = None if wanted_topics is None else frozenset(wanted_topics)
+        self.drain_timeout_s = float(drain_timeout_s)
+        self.received = 0          # frames read from the sources (all recorded, when recording)
+        self.drained = 0           # of which read while draining at stop
+        self.error: BaseException | None = None
+        self._stop_event = threading.Event()
+        self._drain = False
+
+    def stop(self, *, drain: bool) -> None:
+        """Ask the thread to end; ``drain``: first read and record what live sources still hold."""
+        self._drain = drain
+        self._stop_event.set()
+
+    @property
+    def finished(self) -> bool:
+        """Every source is at its end."""
+        return all(s.finished for s in self.sources)
+
+    def check(self) -> None:
+        """Re-raise an exception the thread ended with (on the caller's thread)."""
+        if self.error is not None:
+            err, self.error = self.error, None
+            raise err
+
+    def _take(self, frames: list) -> None:
+        if self.recorder is not None:
+            self.recorder.record(frames)
+        self.received += len(frames)
+        if self.wanted is not None:
+            frames = [f for f in frames if f.topic in self.wanted]
+        self.queue.put(frames)
+
+    def run(self) -> None:
+        timeout = 0.02 if len(self.sources) > 1 else 0.05
+        try:
+            while not self._stop_event.is_set():
+                for src in self.sources:
+                    frames = src.poll(timeout_s=timeout)
+                    if frames:
+                        self._take(frames)
+                if self.recorder is not None:
+                    self.recorder.maybe_flush()
+                if self.finished:
+                    break
+            if self._drain:
+                self._drain_live()
+        except BaseException as e:  # noqa: BLE001 - handed to the analysis thread, re-raised there
+            self.error = e
+        finally:
+            self.queue.close()
+
+    def _drain_live(self) -> None:
+        deadline = time.monotonic() + self.drain_timeout_s
+        for src in self.sources:
+            if not getattr(src, "live", False):
+                continue
+            while time.monotonic() < deadline:
+                frames = src.poll(timeout_s=0)
+                if not frames:
+                    break
+                self.drained += len(frames)
+                self._take(frames)
