@@ -256,3 +256,60 @@ def test_a_missing_or_wrong_signing_key_file_is_one_line(tmp_path):
                             "--signing-key-file", str(path), "--duration", "0.2"], capture_output=True, text=True,
                            timeout=60)
         assert r.returncode == 2 and r.stderr.count("\n") == 1 and words in r.stderr and str(path) in r.stderr
+
+
+def test_crafted_json_on_zenoh_neither_stops_the_monitor_nor_its_replay(tmp_path):
+    """A 400-digit integer in a signal and in the stamp, JSON nested 500 and 5 000 deep, a 5 000-digit
+    integer, a bare array: each counted; the valid samples recorded, analysed and replayed."""
+    import zenoh
+
+    from livesweep.config import SignalSpec
+    from livesweep.monitor.pipeline import MonitorPipeline, MonitorSettings
+    from livesweep.telemetry.replay import McapReplaySource
+    from livesweep.telemetry.zenoh_io import ZenohSource, zenoh_config
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    src = ZenohSource("uav/**", listen_port=port, stamp_field="t")
+    pub = zenoh.open(zenoh_config(connect=[port]))
+    sigs = {n: SignalSpec(name=n, topic="/zenoh/uav/imu", field=n, stamp="t", stamp_scale=1.0) for n in ("u", "y")}
+    st = MonitorSettings(signals=sigs, inputs=("u",), outputs=("y",), band_rad_s=(1.0, 20.0), window_s=20.0,
+                         segment_s=5.0, sample_rate_hz=50.0)
+    out = tmp_path / "zenoh.mcap"
+    from livesweep.telemetry.recorder import McapRecorder
+
+    pipe = MonitorPipeline(st, [src], recorder=McapRecorder(out))
+    t = np.arange(0, 30, 0.02)
+    u = np.sin(3 * t)
+    def crafted(tk: float) -> list[bytes]:
+        now = json.dumps(tk).encode()
+        return [b'{"t": ' + now + b', "u": ' + b"9" * 400 + b', "y": 0}', b'{"t": ' + b"7" * 400 + b', "u": 1, "y": 1}',
+                b'{"t": ' + now + b', "a": ' + b"[" * 500 + b"]" * 500 + b"}", b"[" * 5000 + b"]" * 5000,
+                b'{"t": ' + now + b', "u": ' + b"1" * 5000 + b"}", b"[1, 2, 3]"]
+    sent = 0
+    try:
+        time.sleep(0.5)
+        for k in range(len(t)):
+            pub.put("uav/imu", json.dumps({"t": float(t[k]), "u": float(u[k]), "y": float(0.5 * u[k])}))
+            sent += 1
+            if k % 300 == 150:
+                for c in crafted(float(t[k])):
+                    pub.put("uav/imu", c)
+        deadline = time.monotonic() + 20
+        pipe.run(stop=lambda: pipe.totals.frames >= sent + 2 or time.monotonic() > deadline)
+    finally:
+        pub.close()
+    counts = pipe.summary()["counters"]["sources"][0]
+    n_rounds = sum(1 for k in range(len(t)) if k % 300 == 150)
+    assert counts["malformed"] == 3 * n_rounds            # 500 deep, 5 000 deep, 5 000 digits
+    assert counts["non_object"] == 3 * n_rounds           # the bare array's three numbers
+    assert counts["bad_stamp"] == n_rounds                # the 400-digit stamp
+    assert pipe.aligner.counts["not_a_number"] >= n_rounds  # the 400-digit value
+    recorded = read_summary(out)
+    assert recorded.complete and recorded.message_counts["/zenoh/uav/imu"] == sent + 2 * n_rounds
+    assert pipe.estimates and np.median(pipe.estimates[-1].coherence[0, 0]) > 0.9
+    replay = MonitorPipeline(st, [McapReplaySource(out)])
+    replay.run()
+    assert replay.aligner.counts["not_a_number"] == pipe.aligner.counts["not_a_number"]
+    assert replay.estimates[-1].t_s == pytest.approx(pipe.estimates[-1].t_s)

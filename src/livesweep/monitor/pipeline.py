@@ -56,8 +56,9 @@ LINK_ANOMALIES = (
     ("source", "clock_implausible", "implausible time stamp"), ("source", "kernel_drops", "dropped by the kernel"),
     ("source", "malformed", "malformed JSON"), ("source", "non_object", "not a JSON object"),
     ("source", "bad_stamp", "bad stamp"), ("source", "dropped_queue_full", "dropped (queue full)"),
-    ("source", "clients_refused", "TCP client refused"),
+    ("source", "clients_refused", "TCP client refused"), ("source", "keys_over_limit", "sample on a key beyond the limit"),
     ("pipeline", "analysis_shed", "skipped by the analysis (recorded)"),
+    ("pipeline", "unrecordable", "frame that could not be recorded"),
     ("aligner", "clock_rejected", "sample with an implausible stamp"), ("aligner", "resets", "clock reset"),
     ("aligner", "other_system", "frame of another system"), ("aligner", "samples_skipped", "grid sample skipped"),
     ("aligner", "late_dropped", "late sample"), ("aligner", "not_a_number", "non-numeric value"),
@@ -390,7 +391,8 @@ class MonitorPipeline:
             "pipeline": {"frames_received": self.totals.frames, "frames_analysed": self.totals.analysed,
                          "analysis_shed": self.analysis_shed, "ticks_skipped": self.totals.ticks_skipped,
                          "drained_at_stop": 0 if ingest is None else ingest.drained,
-                         "bad_publish_time": 0 if self.recorder is None else self.recorder.bad_publish_time},
+                         "bad_publish_time": 0 if self.recorder is None else self.recorder.bad_publish_time,
+                         "unrecordable": 0 if self.recorder is None else self.recorder.unrecordable},
         }
 
     def _anomalies(self, c: dict) -> dict[str, int]:

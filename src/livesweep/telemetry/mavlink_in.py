@@ -170,6 +170,7 @@ class _Decoder:
         self._allow_unsigned = bool(allow_unsigned)
         self._warned: set[str] = set()
         self._stamp_clocks: dict[tuple[int, int, str], StampClock] = {}
+        self._time_specs: dict[str, tuple[str, int, int | None] | None] = {}   # msgname -> (field, ns/unit, wrap ns)
         # signing: newest time stamp per (link id, sysid, compid) and overall [10 µs since 2015].
         # Live: like mavutil.setup_signing, a *new* stream must not be more than one minute older
         # than now (rejects replays of old captures). A tlog is old by nature: 0.
@@ -264,26 +265,31 @@ class _Decoder:
 
     def _vehicle_ns(self, rec: dict, mtype: str, receive_ns: int) -> int | None:
         """The record's vehicle time [ns], or None when it has none or it cannot be trusted (counted)."""
-        vns = codec.vehicle_time_ns(rec, mtype)
-        if vns is None:
+        spec = self._time_specs.get(mtype)
+        if spec is None:
+            tf = codec.vehicle_time_field(mtype)
+            wrap = None if tf is None else codec.stamp_wrap_units(mtype, tf[0])
+            spec = self._time_specs[mtype] = None if tf is None else (tf[0], tf[1], None if wrap is None else wrap * tf[1])
+        if spec is None:
             return None
+        field, ns_per_unit, wrap_ns = spec
+        raw = rec[field]
+        vns = raw * ns_per_unit
         if not 0 <= vns <= UINT64_NS_MAX:
             self.counts["clock_unrepresentable"] += 1
-            self._warn_once("clock_unrepresentable", f"MAVLink {mtype} from {rec['sysid']}/{rec['compid']}: time stamp "
-                            f"{vns} ns does not fit a log time; recorded with its receive time (further ones are only "
-                            "counted)")
+            self._warn_once("clock_unrepresentable", f"MAVLink {mtype} from {rec['sysid']}/{rec['compid']}: {field} "
+                            f"{raw} does not fit a log time in ns; recorded with its receive time (further ones are "
+                            "only counted)")
             return None
-        field, ns_per_unit = codec.vehicle_time_field(mtype)
         key = (rec["sysid"], rec["compid"], field)
         clock = self._stamp_clocks.get(key)
         if clock is None:
-            wrap = codec.stamp_wrap_units(mtype, field)
-            clock = self._stamp_clocks[key] = StampClock(1e-9, wrap_units=None if wrap is None else wrap * ns_per_unit)
+            clock = self._stamp_clocks[key] = StampClock(1e-9, wrap_units=wrap_ns)
         if not clock.feed(vns, receive_ns * 1e-9):
             self.counts["clock_implausible"] += 1
             self._warn_once("clock_implausible", f"MAVLink {mtype} from {rec['sysid']}/{rec['compid']}: {field} "
-                            f"{rec[field]} does not follow the stream's clock; recorded with its receive time "
-                            "(further ones are only counted)")
+                            f"{raw} does not follow the stream's clock; recorded with its receive time (further ones "
+                            "are only counted)")
             return None
         return vns
 
@@ -465,6 +471,8 @@ class MavlinkSource:
         for sock in (getattr(conn, "port", None), getattr(conn, "listen", None)):
             if isinstance(sock, socket.socket):
                 self.rcvbuf_granted = self._tune(sock, rcvbuf_bytes)
+        if kind == "tcpin":
+            conn.listen.listen(_MAX_TCP_CLIENTS)   # pymavlink's backlog of 1 would stall a third client
         if kind == "udpin" and _KERNEL_DROPS:
             try:
                 conn.port.setsockopt(socket.SOL_SOCKET, _SO_RXQ_OVFL, 1)

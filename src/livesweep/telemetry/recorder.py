@@ -18,15 +18,19 @@ so Foxglove and other viewers offer their fields for plotting.
 from __future__ import annotations
 
 import json
+import logging
 import threading
 import time
 
 from livesweep import __version__
 from livesweep.telemetry.clock import UINT64_NS_MAX
 from livesweep.telemetry.frames import Frame
+from livesweep.errors import LogFormatError
 from livesweep.telemetry.mcap_log import McapLogWriter
 
 __all__ = ["McapRecorder", "RESULT_PREFIX", "RESULT_SCHEMAS", "COUNTERS_METADATA"]
+
+log = logging.getLogger(__name__)
 
 RESULT_PREFIX = "/livesweep"
 #: Metadata record with the final link and pipeline counters (JSON text per source), written on close.
@@ -137,6 +141,7 @@ class McapRecorder:
         self._lock = threading.Lock()
         self.path = self.writer.path
         self.bad_publish_time = 0
+        self.unrecordable = 0
         for name, values in (metadata or {}).items():
             self.writer.add_metadata(name, values)
         if settings is not None:
@@ -156,7 +161,9 @@ class McapRecorder:
 
         A vehicle time an MCAP record cannot hold falls back to the receive time (counted in
         :attr:`bad_publish_time`; the sources normally catch it first): a frame is never lost to
-        its stamp.
+        its stamp. A frame whose content cannot be encoded as JSON (the sources only deliver
+        decoded JSON and MAVLink records, so this is a defence in depth) is counted in
+        :attr:`unrecordable` and skipped: it never stops the recording.
         """
         with self._lock:
             for f in frames:
@@ -165,7 +172,12 @@ class McapRecorder:
                 if pub is not None and not 0 <= pub <= UINT64_NS_MAX:
                     self.bad_publish_time += 1
                     pub = None
-                self.writer.write(f.topic, f.data, log_time_ns=f.receive_ns, publish_time_ns=pub)
+                try:
+                    self.writer.write(f.topic, f.data, log_time_ns=f.receive_ns, publish_time_ns=pub)
+                except LogFormatError as e:          # this frame's content cannot be JSON: count, go on
+                    self.unrecordable += 1
+                    if self.unrecordable == 1:
+                        log.warning("%s (further such frames are only counted)", e)
             self._maybe_flush()
 
     def record_result(self, name: str, payload: dict, log_time_ns: int) -> None:

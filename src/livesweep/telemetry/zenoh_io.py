@@ -12,7 +12,7 @@ Threads: Zenoh calls the subscriber callback on its own Python thread, holding t
 happens in :meth:`ZenohSource.poll`, on the caller's thread.
 
 Payloads: a JSON object is one sample; a JSON array of objects is a block of samples (each
-object becomes a frame, in order). Malformed JSON (also nested too deeply for the parser, or an
+object becomes a frame, in order). Malformed JSON (also nested deeper than 32 levels, or an
 integer with more digits than Python converts) and non-objects are counted, never fatal. A
 stamp that is not a finite number, does not fit an MCAP time, or does not follow its key's recent
 clock (:class:`~livesweep.telemetry.clock.StampClock`) leaves the frame without a vehicle time
@@ -47,8 +47,11 @@ log = logging.getLogger(__name__)
 _MODES = ("peer", "client", "router")
 _DEFAULT_LISTEN = zenoh.Config().get_json("listen/endpoints")
 _WILD = ("*", "$", "?", "#")
-# keys whose stamps are checked against their own recent clock (beyond: stamps only range-checked)
-_MAX_STAMP_KEYS = 10_000
+# distinct sample keys a source takes (each becomes a recording channel); samples on further keys
+# are counted in ``keys_over_limit`` and dropped, so a flood of keys cannot exhaust memory
+_MAX_KEYS = 10_000
+# telemetry records are flat; deeper JSON (which the recorder would have to re-encode) is malformed
+_MAX_DEPTH = 32
 
 
 def _endpoint(e: Any, what: str) -> str:
@@ -138,6 +141,20 @@ def zenoh_config(
     return c
 
 
+def _depth(value: Any) -> int:
+    """Nesting depth of a parsed JSON value (iterative: any depth the parser accepted)."""
+    deepest, stack = 0, [(value, 1)]
+    while stack:
+        v, d = stack.pop()
+        if isinstance(v, dict):
+            v = v.values()
+        elif not isinstance(v, list):
+            continue
+        deepest = max(deepest, d)
+        stack.extend((x, d + 1) for x in v)
+    return deepest
+
+
 def _without_comments(text: str) -> str:
     """JSON5 text without ``//`` and ``/* */`` comments (a commented-out key is not a setting)."""
     return re.sub(r"/\*.*?\*/|//[^\n]*", "", text, flags=re.S)
@@ -207,7 +224,8 @@ class ZenohSource:
     callback, ``data`` = the JSON object. ``counts``: ``received`` {key: frames},
     ``samples`` (Zenoh samples), ``malformed`` (not JSON / not UTF-8), ``non_object``
     (JSON values, or array items, that are not objects), ``deletes`` (DELETE samples,
-    ignored), ``bad_stamp``, ``dropped_queue_full``.
+    ignored), ``bad_stamp``, ``dropped_queue_full``, ``keys_over_limit`` (samples on keys beyond
+    the first 10 000 distinct ones: dropped, so a flood of keys cannot exhaust memory).
     """
 
     #: A live link: the monitor records it and may shed analysis load, never recording.
@@ -242,7 +260,8 @@ class ZenohSource:
         self._event = threading.Event()
         self._dropped = 0
         self._received: dict[str, int] = {}
-        self._counts = {"samples": 0, "malformed": 0, "non_object": 0, "deletes": 0, "bad_stamp": 0}
+        self._counts = {"samples": 0, "malformed": 0, "non_object": 0, "deletes": 0, "bad_stamp": 0,
+                        "keys_over_limit": 0}
         self._pending: collections.deque[Frame] = collections.deque()
         self._closed = False
         self._warned: set[str] = set()
@@ -304,16 +323,18 @@ class ZenohSource:
         if vns is not None and 0 <= vns <= UINT64_NS_MAX:
             clock = self._stamp_clocks.get(key)
             if clock is None:
-                if len(self._stamp_clocks) >= _MAX_STAMP_KEYS:
-                    clock = None
-                else:
-                    clock = self._stamp_clocks[key] = StampClock(1e-9)
-            if clock is None or clock.feed(vns, t_ns * 1e-9):
+                clock = self._stamp_clocks[key] = StampClock(1e-9)
+            if clock.feed(vns, t_ns * 1e-9):
                 return vns
         self._counts["bad_stamp"] += 1
         return None
 
     def _frame(self, t_ns: int, key: str, obj: dict, out: collections.deque) -> None:
+        if key not in self._received and len(self._received) >= _MAX_KEYS:
+            self._counts["keys_over_limit"] += 1
+            self._warn_once("keys", f"zenoh {key}: more than {_MAX_KEYS} distinct keys; samples on further keys are "
+                            "dropped and counted (keys_over_limit)")
+            return
         vns = None if self.stamp_field is None else self._stamp_ns(t_ns, key, obj)
         self._received[key] = self._received.get(key, 0) + 1
         out.append(Frame(f"/zenoh/{key}", t_ns, vns, obj))
@@ -329,6 +350,11 @@ class ZenohSource:
         except (ValueError, UnicodeDecodeError, RecursionError):
             c["malformed"] += 1
             self._warn_once("malformed", f"zenoh {key}: payload is not JSON (further ones are only counted)")
+            return
+        if (payload.count(b"{") + payload.count(b"[") > _MAX_DEPTH) and _depth(value) > _MAX_DEPTH:
+            c["malformed"] += 1
+            self._warn_once("deep", f"zenoh {key}: JSON nested deeper than {_MAX_DEPTH} levels (further ones are "
+                            "only counted)")
             return
         if isinstance(value, dict):
             self._frame(t_ns, key, value, out)
