@@ -149,6 +149,7 @@ class StampClock:
         pend = self._pending
         if pend and not self._plausible(s - pend[-1][1], receive_s - pend[-1][2]):
             self._drop_pending()
+            pend = self._pending
         pend.append((raw, s, receive_s, payload))
         if len(pend) < self.confirm:
             return []
