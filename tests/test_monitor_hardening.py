@@ -313,3 +313,38 @@ def test_crafted_json_on_zenoh_neither_stops_the_monitor_nor_its_replay(tmp_path
     replay.run()
     assert replay.aligner.counts["not_a_number"] == pipe.aligner.counts["not_a_number"]
     assert replay.estimates[-1].t_s == pytest.approx(pipe.estimates[-1].t_s)
+
+
+def test_replay_skips_and_counts_damaged_messages(tmp_path):
+    """A recording with a JSON array, invalid JSON and JSON nested 5 000 deep among its messages
+    (written with the standard mcap writer): the replay goes on, counts the three, and analyses
+    every other message."""
+    from mcap.writer import Writer
+
+    from livesweep.config import SignalSpec
+    from livesweep.monitor.pipeline import MonitorPipeline, MonitorSettings
+    from livesweep.telemetry.replay import McapReplaySource
+
+    path = tmp_path / "damaged.mcap"
+    t = np.arange(0, 40, 0.02)
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        sid = w.register_schema("x", "jsonschema", b"{}")
+        cid = w.register_channel("/x", "json", sid)
+        for k, tk in enumerate(t):
+            data = json.dumps({"t": tk, "u": np.sin(3 * tk), "y": 0.5 * np.sin(3 * tk)}).encode()
+            w.add_message(cid, int(1e9 + tk * 1e9), data, int(1e9 + tk * 1e9))
+            if k in (500, 1000, 1500):
+                bad = {500: b"[1, 2]", 1000: b"{not json", 1500: b"[" * 5000 + b"]" * 5000}[k]
+                w.add_message(cid, int(1e9 + tk * 1e9), bad, int(1e9 + tk * 1e9))
+        w.finish()
+    sigs = {n: SignalSpec(name=n, topic="/x", field=n, stamp="t", stamp_scale=1.0) for n in ("u", "y")}
+    st = MonitorSettings(signals=sigs, inputs=("u",), outputs=("y",), band_rad_s=(1.0, 20.0), window_s=20.0,
+                         segment_s=5.0)
+    src = McapReplaySource(path)
+    pipe = MonitorPipeline(st, [src])
+    summary = pipe.run()
+    assert src.counts["skipped_messages"] == 3
+    assert summary["frames"] == len(t) and pipe.aligner.counts["samples"] == 2 * len(t)
+    assert np.median(pipe.estimates[-1].coherence[0, 0]) > 0.99

@@ -57,6 +57,7 @@ LINK_ANOMALIES = (
     ("source", "malformed", "malformed JSON"), ("source", "non_object", "not a JSON object"),
     ("source", "bad_stamp", "bad stamp"), ("source", "dropped_queue_full", "dropped (queue full)"),
     ("source", "clients_refused", "TCP client refused"), ("source", "keys_over_limit", "sample on a key beyond the limit"),
+    ("source", "skipped_messages", "damaged message skipped (replay)"),
     ("pipeline", "analysis_shed", "skipped by the analysis (recorded)"),
     ("pipeline", "unrecordable", "frame that could not be recorded"),
     ("aligner", "clock_rejected", "sample with an implausible stamp"), ("aligner", "resets", "clock reset"),

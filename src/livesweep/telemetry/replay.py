@@ -7,7 +7,7 @@ import time
 
 from livesweep.errors import ConfigError
 from livesweep.telemetry.frames import Frame
-from livesweep.telemetry.mcap_log import iter_file_order
+from livesweep.telemetry.mcap_log import SkippedMessages, iter_file_order
 from livesweep.telemetry.recorder import RESULT_PREFIX
 
 __all__ = ["McapReplaySource"]
@@ -23,6 +23,10 @@ class McapReplaySource:
         0 or inf: as fast as possible; N: N times real time (paced by the receive times).
     include_results : bool
         Replay livesweep's own ``/livesweep/...`` results too (default no: they are recomputed).
+
+    A message that is not a JSON object (damaged, nested too deeply, an array) or a chunk that
+    fails its CRC is skipped and counted (``counts["skipped_messages"]``, and by reason in
+    ``counts["skipped"]``), never fatal: the rest of the log replays.
     """
 
     #: A file: the monitor reads it at its own pace and never sheds analysis load.
@@ -34,7 +38,8 @@ class McapReplaySource:
             raise ConfigError(f"replay speed must be > 0 (or 0 for as fast as possible), got {speed!r}")
         self.path = path
         self.speed = float(speed)
-        self._it = iter_file_order(path)
+        self._skipped = SkippedMessages()
+        self._it = iter_file_order(path, skipped=self._skipped)
         self._include_results = include_results
         self._clock, self._sleep = clock, sleep
         self._t0_log: int | None = None
@@ -45,7 +50,7 @@ class McapReplaySource:
 
     @property
     def counts(self) -> dict:
-        return self._counts
+        return {**self._counts, "skipped_messages": self._skipped.total, "skipped": dict(self._skipped.counts)}
 
     @property
     def finished(self) -> bool:
