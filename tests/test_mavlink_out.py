@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import re
 import os
 import select
 import socket
@@ -507,7 +508,8 @@ def _check_against_schema(value, schema, where):
     types = t if isinstance(t, list) else [t]
     py = {"number": (int, float), "integer": (int,), "string": (str,), "array": (list,), "null": (type(None),)}
     if isinstance(value, float) and not math.isfinite(value):
-        value = None  # the MCAP writer stores non-finite floats as null
+        value = "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")  # as the MCAP writer stores them
+        assert re.fullmatch(schema["pattern"], value), where
     assert any(isinstance(value, py[x]) and not isinstance(value, bool) for x in types), (where, value, t)
     if isinstance(value, int) and "integer" in types:
         assert schema["minimum"] <= value <= schema["maximum"], where
@@ -540,7 +542,7 @@ def test_json_schema_matches_records(msgname):
         ctype = cls.fieldtypes[cls.fieldnames.index(k)]
         base = prop["items"]["type"] if prop["type"] == "array" else prop["type"]
         if ctype in ("float", "double"):
-            assert base == ["number", "null"], k
+            assert base == ["number", "string", "null"], k
         elif ctype == "char":
             assert prop["type"] == "string", k
         else:

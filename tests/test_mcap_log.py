@@ -169,7 +169,9 @@ def test_metadata_and_attachments_round_trip(tmp_path):
     assert names == ["test_point", WRITER_METADATA_NAME]
 
 
-def test_nonfinite_written_as_null_and_counted(tmp_path):
+def test_nonfinite_written_as_strings_that_say_which_and_counted(tmp_path):
+    """NaN, +inf and -inf stay distinguishable in the log (JSON has no such numbers; null would lose
+    which): the strings of the protobuf JSON mapping, read back as NaN samples by the column readers."""
     path = tmp_path / "nan.mcap"
     w = McapLogWriter(path)
     w.add_channel("/sim/a", "A", {"type": "object"})
@@ -182,10 +184,10 @@ def test_nonfinite_written_as_null_and_counted(tmp_path):
     w.close()
     with open(path, "rb") as f:
         raw = [m.data for _, _, m in make_reader(f).iter_messages()]
-    assert raw[0] == b'{"x":null,"v":[1.0,null,[null,2.5]],"d":{"y":null}}'
-    assert raw[1] == b'{"x":null,"arr":[0.5,null],"n":7}'
+    assert raw[0] == b'{"x":"NaN","v":[1.0,"Infinity",["-Infinity",2.5]],"d":{"y":"NaN"}}'
+    assert raw[1] == b'{"x":"NaN","arr":[0.5,"NaN"],"n":7}'
     msgs = list(read_messages(path))
-    assert msgs[0].data == {"x": None, "v": [1.0, None, [None, 2.5]], "d": {"y": None}}
+    assert msgs[0].data == {"x": "NaN", "v": [1.0, "Infinity", ["-Infinity", 2.5]], "d": {"y": "NaN"}}
     info = read_metadata(path)[WRITER_METADATA_NAME]
     assert info["nonfinite_total"] == "6"
     assert info["nonfinite:/sim/a"] == "6" and info["nonfinite:/sim/b"] == "0"

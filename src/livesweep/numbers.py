@@ -1,5 +1,12 @@
-"""Small numeric helpers shared across livesweep: read-only arrays for frozen results, and numbers
-made JSON-safe (non-finite -> None)."""
+"""Small numeric helpers shared across livesweep: read-only arrays for frozen results, numbers made
+JSON-safe for reports (non-finite -> None), and the one convention for non-finite floats in
+recorded JSON messages.
+
+JSON has no NaN or infinity. In messages livesweep records (MCAP logs, Zenoh results) a non-finite
+float is written as the string ``"NaN"``, ``"Infinity"`` or ``"-Infinity"`` (the convention of the
+protobuf JSON mapping), so a recording keeps which one it was; readers turn these three strings
+back into floats (:func:`nonfinite_value`).
+"""
 
 from __future__ import annotations
 
@@ -7,7 +14,28 @@ import math
 
 import numpy as np
 
-__all__ = ["frozen_array", "finite_or_none"]
+__all__ = ["frozen_array", "finite_or_none", "NONFINITE_STRINGS", "nonfinite_text", "nonfinite_value",
+           "float_json_schema"]
+
+#: How a non-finite float is written in a recorded JSON message, and read back.
+NONFINITE_STRINGS = {"NaN": math.nan, "Infinity": math.inf, "-Infinity": -math.inf}
+
+
+def float_json_schema(**extra) -> dict:
+    """JSON Schema of a recorded float: a number, one of the non-finite strings, or null (``null``
+    is how logs written before this convention stored non-finite values). ``pattern`` constrains
+    strings only. ``extra`` keys (``description``) are added; a fresh dict on every call."""
+    return {"type": ["number", "string", "null"], "pattern": "^(NaN|Infinity|-Infinity)$", **extra}
+
+
+def nonfinite_text(x: float) -> str:
+    """``"NaN"``, ``"Infinity"`` or ``"-Infinity"`` for a non-finite float ``x``."""
+    return "NaN" if math.isnan(x) else ("Infinity" if x > 0 else "-Infinity")
+
+
+def nonfinite_value(v):
+    """The float a recorded ``"NaN"`` / ``"Infinity"`` / ``"-Infinity"`` stands for; None for anything else."""
+    return NONFINITE_STRINGS.get(v) if isinstance(v, str) else None
 
 
 def frozen_array(a, dtype=float) -> np.ndarray:

@@ -47,6 +47,7 @@ from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as _dialect  # noqa: E402
 
 from livesweep.errors import ConfigError, LivesweepError  # noqa: E402
+from livesweep.numbers import float_json_schema, nonfinite_value  # noqa: E402
 
 __all__ = [
     "DIALECT",
@@ -193,10 +194,8 @@ def _spec(msgname: str) -> _Spec:
 
 
 def _item_schema(f: _Field) -> dict[str, Any]:
-    if f.kind == "f32":
-        return {"type": ["number", "null"]}
-    if f.kind == "f64":
-        return {"type": ["number", "null"]}
+    if f.kind in ("f32", "f64"):
+        return float_json_schema()
     return {"type": "integer", "minimum": f.lo, "maximum": f.hi}
 
 
@@ -204,7 +203,8 @@ def json_schema(msgname: str) -> dict[str, Any]:
     """JSON Schema (draft 2020-12) of the canonical record of ``msgname``.
 
     Properties: ``sysid``, ``compid``, then every field in ``fieldnames`` order. Floats are
-    ``["number", "null"]`` (non-finite values are stored as ``null``), integers carry
+    numbers, or one of the strings ``"NaN"``, ``"Infinity"``, ``"-Infinity"`` for non-finite
+    values (:mod:`livesweep.numbers`; ``null`` in logs written before), integers carry
     their C range, ``char[n]`` is a string of at most ``n`` characters and arrays are
     ``{"type": "array", "items": ..., "minItems": n, "maxItems": n}``. A fresh dict is
     returned on every call.
@@ -235,7 +235,7 @@ def json_schema(msgname: str) -> dict[str, Any]:
         "description": (
             f"MAVLink 2 message {msgname} (id {spec.cls.id}, dialect {DIALECT}); "
             "float fields are float32 values written as their shortest round-trip decimal; "
-            "non-finite floats are null"
+            "non-finite floats are the strings NaN, Infinity, -Infinity"
         ),
         "type": "object",
         "properties": props,
@@ -262,6 +262,9 @@ def _coerce_float(msgname: str, f: _Field, v: Any) -> float:
         return float(str(np.float32(v)))
     if v is None:
         return math.nan
+    special = nonfinite_value(v)          # "NaN" / "Infinity" / "-Infinity" as recorded
+    if special is not None:
+        return special
     if isinstance(v, (str, bytes, bytearray)) or not isinstance(
         v, (int, float, np.integer, np.floating, np.bool_)
     ):

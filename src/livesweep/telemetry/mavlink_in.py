@@ -34,7 +34,8 @@ Nothing is dropped silently: every byte that does not become a frame is counted 
     clock_implausible      frames whose time stamp does not follow their stream's recent clock
                            (:class:`~livesweep.telemetry.clock.StampClock`): likewise
     kernel_drops           datagrams the kernel dropped because the socket buffer was full (UDP
-                           on Linux, ``SO_RXQ_OVFL``)
+                           on Linux, ``SO_RXQ_OVFL``; the kernel stamps its count on the next
+                           datagram it queues, so drops show up with the next datagram read)
     bytes                  bytes read
 
 Signing (MAVLink 2): with ``signing_key`` set, every signed frame is checked here, not by

@@ -10,9 +10,12 @@ Writing
 :class:`McapLogWriter` wraps :class:`mcap.writer.Writer`:
 
 * Messages are encoded as compact JSON (``separators=(",", ":")``, ``allow_nan=False``).
-  Non-finite floats (NaN, +-inf), also nested in lists and dicts, are written as ``null`` and
-  counted per topic (:attr:`McapLogWriter.nonfinite_counts`); the counts go into a metadata
-  record named ``"livesweep.writer"`` when the writer is closed.
+  Non-finite floats, also nested in lists and dicts, are written as the strings ``"NaN"``,
+  ``"Infinity"`` and ``"-Infinity"`` (:mod:`livesweep.numbers`: JSON has no such numbers, and
+  ``null`` would lose which one it was) and counted per topic
+  (:attr:`McapLogWriter.nonfinite_counts`); the counts go into a metadata record named
+  ``"livesweep.writer"`` when the writer is closed. The column readers read these strings as NaN
+  (a missing sample, as ``null``).
 * The output is byte-for-byte deterministic for identical calls: no wall clock, no randomness
   (attachment ``create_time`` is the given ``log_time_ns``).
 * ``atomic=True`` (default, for simulators and batch tools) writes ``<path>.partial`` and renames
@@ -65,6 +68,7 @@ from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import CompressionType, Writer
 
 from livesweep.errors import LogFormatError, quote
+from livesweep.numbers import NONFINITE_STRINGS, nonfinite_text
 
 __all__ = [
     "WRITER_METADATA_NAME",
@@ -117,7 +121,8 @@ def _check_time_ns(value: Any, what: str, where: str) -> int:
 
 
 def _sanitize(obj: Any, counter: list[int]) -> Any:
-    """Copy of ``obj`` with non-finite floats as None (counted in ``counter[0]``).
+    """Copy of ``obj`` with non-finite floats as ``"NaN"`` / ``"Infinity"`` / ``"-Infinity"``
+    (:mod:`livesweep.numbers`; counted in ``counter[0]``).
 
     Tuples become lists; numpy arrays and numpy scalars become their Python equivalents. Other
     types are returned unchanged (``json.dumps`` rejects the ones it cannot encode).
@@ -126,7 +131,7 @@ def _sanitize(obj: Any, counter: list[int]) -> Any:
         if math.isfinite(obj):
             return obj
         counter[0] += 1
-        return None
+        return nonfinite_text(obj)
     if isinstance(obj, dict):
         return {k: _sanitize(v, counter) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -212,7 +217,7 @@ class McapLogWriter:
     message_counts : dict[str, int]
         Messages written per topic (a copy).
     nonfinite_counts : dict[str, int]
-        Non-finite floats written as ``null`` per topic (a copy).
+        Non-finite floats written as ``"NaN"`` / ``"Infinity"`` / ``"-Infinity"`` per topic (a copy).
 
     Notes
     -----
@@ -301,7 +306,7 @@ class McapLogWriter:
 
     @property
     def nonfinite_counts(self) -> dict[str, int]:
-        """Non-finite floats written as ``null`` per topic."""
+        """Non-finite floats written as ``"NaN"`` / ``"Infinity"`` / ``"-Infinity"`` per topic."""
         return dict(self._nonfinite_counts)
 
     @property
@@ -389,7 +394,7 @@ class McapLogWriter:
         return cid
 
     def _encode(self, topic: str, message: dict) -> tuple[bytes, int]:
-        """Compact JSON of ``message`` and the number of non-finite floats nulled."""
+        """Compact JSON of ``message`` and the number of non-finite floats written as strings."""
         try:
             return json.dumps(message, separators=_JSON_SEPARATORS, allow_nan=False).encode("utf-8"), 0
         except (TypeError, ValueError):
@@ -419,7 +424,8 @@ class McapLogWriter:
         topic : str
             A topic added with :meth:`add_channel`.
         message : dict
-            JSON object. Non-finite floats (also nested) are written as ``null`` and counted in
+            JSON object. Non-finite floats (also nested) are written as ``"NaN"`` / ``"Infinity"``
+            / ``"-Infinity"`` and counted in
             :attr:`nonfinite_counts`; numpy arrays and scalars are converted; tuples become lists.
         log_time_ns : int
             Receive time, integer nanoseconds >= 0.
@@ -1258,8 +1264,9 @@ def read_fields(
     Returns
     -------
     dict[str, numpy.ndarray]
-        One float64 array per field (``null`` -> NaN, booleans -> 0.0/1.0) and ``"t_ns"``
-        (int64 nanoseconds). Arrays are empty when the topic has no messages.
+        One float64 array per field (``null`` and the recorded non-finite strings ``"NaN"``,
+        ``"Infinity"``, ``"-Infinity"`` -> NaN, a missing sample; booleans -> 0.0/1.0) and
+        ``"t_ns"`` (int64 nanoseconds). Arrays are empty when the topic has no messages.
 
     Raises
     ------
@@ -1333,7 +1340,8 @@ def _not_a_number(col: list) -> tuple[int, str] | None:
 
 
 def _column(objs: list, field: str, missing: str, where: str, log_times: list[int]) -> np.ndarray:
-    """One float column of ``field`` over ``objs`` (null -> NaN); errors name the message.
+    """One float column of ``field`` over ``objs`` (null and recorded non-finite strings -> NaN);
+    errors name the message.
 
     A value beyond the float64 range (a 400-digit integer, ``1e400``) is an error, not NaN: no
     sensor logs it, so it marks a damaged or crafted message, and the message is named so the
@@ -1349,6 +1357,8 @@ def _column(objs: list, field: str, missing: str, where: str, log_times: list[in
             raise LogFormatError(f"{where}: field {field!r} is missing from message {k} (log_time {log_times[k]} ns); "
                                  f"fields present: {quote(sorted(objs[k]))}")
         col = [math.nan if v is _MISSING else v for v in col]
+    if any(type(v) is str for v in col):               # recorded non-finite values: missing samples
+        col = [math.nan if type(v) is str and v in NONFINITE_STRINGS else v for v in col]
     try:
         arr = np.array(col, dtype=np.float64)          # None -> nan, bool -> 0/1
     except (TypeError, ValueError, OverflowError):

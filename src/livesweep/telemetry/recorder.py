@@ -26,6 +26,7 @@ from livesweep import __version__
 from livesweep.telemetry.clock import UINT64_NS_MAX
 from livesweep.telemetry.frames import Frame
 from livesweep.errors import LogFormatError
+from livesweep.numbers import float_json_schema
 from livesweep.telemetry.mcap_log import McapLogWriter
 
 __all__ = ["McapRecorder", "RESULT_PREFIX", "RESULT_SCHEMAS", "COUNTERS_METADATA"]
@@ -82,7 +83,7 @@ RESULT_SCHEMAS: dict[str, dict] = {
             "conditioned": {"type": "boolean"},
             "omega_rad_s": {"type": "array", "items": {"type": "number"}},
             "coherence": {"type": "object", "description": "output/input -> coherence over omega_rad_s",
-                          "additionalProperties": {"type": "array", "items": {"type": ["number", "null"]}}},
+                          "additionalProperties": {"type": "array", "items": float_json_schema()}},
             "adequacy": {"type": "array", "items": {"type": "object", "properties": {
                 "output": {"type": "string"}, "input": {"type": "string"},
                 "band": {"type": ["array", "null"], "items": {"type": "number"}},
