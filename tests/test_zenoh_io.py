@@ -211,7 +211,7 @@ def test_publisher_puts_json_with_block():
     roll = [json.loads(p) for k, p, _ in received if k == "livesweep/coherence/roll"]
     assert roll == [{"i": i, "f_hz": [0.5, 1.0], "coh": [0.9, 0.95]} for i in range(50)]
     ev = [(json.loads(p), s) for k, p, s in received if k == "livesweep/events"]
-    assert ev[0][0] == {"msg": "sweep done", "bad": None, "inf": [None, 1.0]}  # valid JSON: null
+    assert ev[0][0] == {"msg": "sweep done", "bad": "NaN", "inf": ["Infinity", 1.0]}  # valid JSON, says which
     assert str(ev[0][1].encoding).startswith("application/json")
     assert ev[0][1].congestion_control == zenoh.CongestionControl.BLOCK
     assert [json.loads(p) for k, p, _ in received if k == "livesweep/block"] == [[{"k": 0}, {"k": 1}]]

@@ -37,6 +37,7 @@ from typing import Any
 import zenoh
 
 from livesweep.errors import ConfigError, LivesweepError
+from livesweep.numbers import nonfinite_text
 from livesweep.telemetry.clock import UINT64_NS_MAX, ReceiveClock, StampClock
 from livesweep.telemetry.frames import Frame
 
@@ -419,9 +420,10 @@ class ZenohSource:
 
 
 def _finite(v: Any) -> tuple[Any, int]:
-    """``v`` with non-finite floats replaced by None, and how many were replaced."""
+    """``v`` with non-finite floats as ``"NaN"`` / ``"Infinity"`` / ``"-Infinity"`` (the recording's
+    convention, :mod:`livesweep.numbers`), and how many were replaced."""
     if isinstance(v, float):
-        return (v, 0) if math.isfinite(v) else (None, 1)
+        return (v, 0) if math.isfinite(v) else (nonfinite_text(v), 1)
     if isinstance(v, dict):
         n = 0
         out = {}
@@ -444,7 +446,8 @@ class ZenohPublisher:
     """Publish JSON under ``<prefix>/<key>`` with ``CongestionControl.BLOCK`` (nothing dropped).
 
     ``config`` or ``listen_port``/``connect_port`` as for :class:`ZenohSource`. Non-finite
-    floats (NaN, inf: not JSON) are published as ``null`` and counted in ``non_finite``.
+    floats (NaN, inf: not JSON) are published as ``"NaN"`` / ``"Infinity"`` / ``"-Infinity"``, as
+    in the recording, and counted in ``non_finite``.
     ``published`` counts puts per key.
     """
 
