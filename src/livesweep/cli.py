@@ -559,6 +559,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("src", help="the log (its format is recognised by content, not by name)")
     c.add_argument("--out", required=True, help="MCAP file to write")
     c.add_argument("--columns", help="column map (TOML) for .npy and text tables")
+    c.add_argument("--force", action="store_true", help="replace an existing --out (never the source log itself)")
+    c.add_argument("--partial", action="store_true",
+                   help="convert a damaged DataFlash or ULog log even when less than half of it is readable")
     c.set_defaults(func=cmd_convert)
 
     from livesweep.batch import add_batch_arguments
@@ -579,7 +582,9 @@ def cmd_convert(args) -> int:
     from livesweep.convert import convert
 
     options = {"column_map": args.columns} if args.columns else {}
-    res = convert(args.src, args.out, **options)
+    if args.partial:
+        options["partial"] = True
+    res = convert(args.src, args.out, force=args.force, **options)
     print(f"{res.source.name} ({res.format}{', ' + res.format_version if res.format_version else ''}) -> {res.output}")
     print(f"  messages read {res.messages_read}, written {res.messages_written} on {len(res.topics)} channels")
     print(f"  skipped: {res.skipped or 'none'}; repaired: {res.repaired or 'none'}")

@@ -22,12 +22,13 @@ format         module                                      channels
 from __future__ import annotations
 
 import importlib
+import os
 from pathlib import Path
 
 from livesweep.convert.common import ConversionResult, sniff_format
 from livesweep.errors import LogFormatError
 
-__all__ = ["ConversionResult", "sniff_format", "convert", "CONVERTERS"]
+__all__ = ["ConversionResult", "sniff_format", "convert", "check_output", "CONVERTERS"]
 
 #: format -> "module:function"; each function is ``f(src: Path, out: Path, **options) -> ConversionResult``
 CONVERTERS = {
@@ -41,23 +42,70 @@ CONVERTERS = {
 }
 
 
-def convert(src, out, **options) -> ConversionResult:
+def _same_file(a: Path, b: Path) -> bool:
+    """True when ``a`` and ``b`` are one file (also through symbolic or hard links: same device
+    and inode)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:              # either does not exist (or cannot be looked at): not the same file
+        return False
+
+
+def check_output(out, inputs, *, force: bool = False) -> None:
+    """Refuse an output that is one of the inputs (always) or that exists (unless ``force``).
+
+    The converters write ``<out>.partial`` and rename it onto ``out``, so both names are checked
+    against every input.
+
+    Parameters
+    ----------
+    out : str or Path
+        The MCAP file to write.
+    inputs : iterable of str or Path
+        Files the conversion reads (the log, a column map).
+    force : bool
+        Replace an existing ``out`` that is not an input.
+
+    Raises
+    ------
+    LogFormatError
+        Naming the output and the input it is, or saying it exists and ``--force`` replaces it.
+    """
+    out = Path(out)
+    for src in map(Path, inputs):
+        for target in (out, out.with_name(out.name + ".partial")):
+            if _same_file(src, target):
+                raise LogFormatError(f"--out {out}: {target} is the input {src} (the same file); an input is never "
+                                     "overwritten")
+    if out.is_dir():
+        raise LogFormatError(f"--out {out} is a directory; give a file name ending in .mcap")
+    if out.exists() and not force:
+        raise LogFormatError(f"--out {out} exists; it is not overwritten unless asked (--force)")
+
+
+def convert(src, out, *, force: bool = False, **options) -> ConversionResult:
     """Convert ``src`` (any supported format, recognised by content) to the MCAP file ``out``.
 
     Parameters
     ----------
     src, out : str or Path
+    force : bool
+        Replace an existing ``out`` (never one that is ``src`` or the column map).
     **options
-        Passed to the format's converter (e.g. ``column_map`` for tables).
+        Passed to the format's converter (e.g. ``column_map`` for tables, ``partial`` for
+        DataFlash and ULog).
 
     Raises
     ------
     LogFormatError
-        Unknown or unsupported format, a corrupt file, an output that cannot be written.
+        Unknown or unsupported format, a corrupt file, an output that is an input or exists
+        (without ``force``) or cannot be written; nothing is written then.
     ConfigError
         Bad options (e.g. a column map naming a missing column).
     """
     src, out = Path(src), Path(out)
+    column_map = options.get("column_map")
+    check_output(out, [src] + ([column_map] if isinstance(column_map, (str, os.PathLike)) else []), force=force)
     fmt = sniff_format(src)
     if fmt == "mcap":
         raise LogFormatError(f"{src}: already an MCAP file; nothing to convert")

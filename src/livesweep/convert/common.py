@@ -13,7 +13,16 @@ from livesweep import __version__
 from livesweep.errors import ConfigError, LogFormatError
 from livesweep.telemetry.mcap_log import McapLogWriter
 
-__all__ = ["ConversionResult", "ConversionWriter", "sniff_format", "sha256_of", "refuse_options"]
+__all__ = ["ConversionResult", "ConversionWriter", "sniff_format", "sha256_of", "refuse_options", "MAX_BOOT_US",
+           "UNIX_RANGE_S", "MIN_RECORD_FRACTION"]
+
+#: Largest plausible time since boot [us] (~32 years): anything larger is a corrupt time stamp.
+MAX_BOOT_US = 10**15
+#: Plausible UNIX times [s], 2000-01-01 to 2100-01-01: a GPS or UTC time outside is no fix or corrupt.
+UNIX_RANGE_S = (946_684_800, 4_102_444_800)
+#: Least fraction of a damaged log's bytes that must convert; below it a converter refuses unless
+#: asked (``partial``): a log that is mostly corruption must not pass for a whole one.
+MIN_RECORD_FRACTION = 0.5
 
 #: (first bytes, format) for the formats with a signature at the start of the file
 _MAGIC = (
@@ -42,7 +51,7 @@ def sha256_of(path: Path) -> str:
 
 def _plausible_tlog(head: bytes) -> bool:
     """``[uint64 BE us UNIX time 2000..2100][0xFE|0xFD ...]`` somewhere in the first records."""
-    lo, hi = 946_684_800 * 10**6, 4_102_444_800 * 10**6
+    lo, hi = (s * 10**6 for s in UNIX_RANGE_S)
     if len(head) < 9:
         return False
     (t0,) = struct.unpack(">Q", head[:8])

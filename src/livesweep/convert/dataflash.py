@@ -1,12 +1,10 @@
 """ArduPilot DataFlash (``.bin``) and PX4 sdlog2 (``.px4log``) logs to livesweep MCAP.
 
 Both are the same binary format: ``A3 95 <type>`` then the fields of that type, packed as its
-``FMT`` record says. The file is indexed with pymavlink's
-:class:`pymavlink.DFReader.DFReader_binary` (used directly; never through
-``mavutil.mavlink_connection``, which picks a reader by file name and executes paths that
-contain ``/bin/``), without its clock search, which walks the whole file when there is no GPS.
-The records of each type are then decoded column-wise with numpy from the offsets
-DFReader found, and written in file order.
+``FMT`` record says. The file is framed here, record by record, as pymavlink's
+:class:`pymavlink.DFReader.DFReader_binary` frames it, except that corruption does not end the
+walk (DFReader stops at the first record whose type has no FMT): see *Damage*. The records of
+each type are then decoded column-wise with numpy and written in file order.
 
 Channels
     ``/dataflash/<NAME>`` per message type (``FMT``, ``PARM``, ``MSG``, ``ATT``, ``SIDD``,
@@ -50,17 +48,25 @@ Time base
 
 Damage
     A log cut mid-message (the last record incomplete) ends cleanly:
-    ``skipped["truncated_tail"]`` and a warning. Bytes between records that are not records
-    (corruption, padding) are counted per run in ``skipped["garbage"]`` with a warning; records
-    whose type has an unusable FMT in ``skipped["bad_format"]``. DataFlash has no checksum, so a
-    record overwritten in place is converted as it reads; a time stamp beyond 10**15 µs is
-    replaced by the previous record's time (``repaired["implausible_time"]``). A file that does
-    not start with an FMT record (``A3 95 80``) defining a usable type (ArduPilot's first FMT
-    defines FMT itself; sdlog2's defines another type) raises
+    ``skipped["truncated_tail"]`` and a warning. Bytes that are not records (flipped or zeroed
+    bytes, an overwritten header, records of a type whose FMT is missing) are skipped up to the
+    next ``A3 95 <type with an FMT>`` whose record is followed by another record header, and
+    counted per run in ``skipped["garbage"]`` with a warning giving the bytes, their share of the
+    file and the first offset. An FMT record that is unusable (bad name, format characters,
+    column count or length) or that redefines a type differently is not used (the first
+    definition of a type wins); records of a type without a usable FMT are framed by the length
+    it declares and counted in ``skipped["bad_format"]``. If less than
+    ``MIN_RECORD_FRACTION`` (half) of the file's bytes are records that convert, nothing is
+    written and :class:`~livesweep.errors.LogFormatError` gives the fraction, unless ``partial``
+    (``livesweep convert --partial``) asks to convert what is readable. DataFlash has no
+    checksum, so a record overwritten in place is converted as it reads; a time stamp beyond
+    10**15 µs is replaced by the previous record's time (``repaired["implausible_time"]``). A
+    file that does not start with an FMT record (``A3 95 80``) defining a usable type
+    (ArduPilot's first FMT defines FMT itself; sdlog2's defines another type) raises
     :class:`~livesweep.errors.LogFormatError` naming the file, and nothing is written.
 
-Memory: the file, DFReader's offset index and the decoded numpy records are held in memory
-(a few times the file size); Python values are built 65 536 records at a time.
+Memory: the file, the record offsets and the decoded numpy records are held in memory (a few
+times the file size); Python values are built 65 536 records at a time.
 
 ``format_version``: the firmware string of ``VER.FWS`` or of the first ``MSG`` that names the
 firmware (e.g. ``"ArduCopter V4.0.3"``; the git hash in brackets is dropped; it stays in the
@@ -69,16 +75,17 @@ firmware (e.g. ``"ArduCopter V4.0.3"``; the git hash in brackets is dropped; it 
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import re
 import struct
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
-from livesweep.convert.common import ConversionResult, ConversionWriter, refuse_options
+from livesweep.convert.common import (MAX_BOOT_US, MIN_RECORD_FRACTION, UNIX_RANGE_S, ConversionResult,
+                                      ConversionWriter, refuse_options)
 from livesweep.errors import LogFormatError
 
 __all__ = ["convert_dataflash"]
@@ -104,22 +111,17 @@ _FIRMWARE_RE = re.compile(r"^((?:Ardu\w+|APM:\w+|APMrover2|Rover|Blimp|AntennaTr
                           r"\s+V?\d[\w.\-]*)")
 _GPS_EPOCH_S = 315_964_800          # 1980-01-06 in UNIX seconds
 _GPS_LEAP_S = 18                    # GPS - UTC since 2017 (what pymavlink's DFReader subtracts)
-_UNIX_MIN_NS, _UNIX_MAX_NS = 946_684_800 * 10**9, 4_102_444_800 * 10**9
+_UNIX_MIN_NS, _UNIX_MAX_NS = (s * 10**9 for s in UNIX_RANGE_S)
 _WINDOW = 65_536                    # records turned into Python values at a time (bounds memory)
-_MAX_BOOT_US = 10**15               # ~32 years since boot: anything larger is a corrupt time stamp
 
 
-def _reader_class():
-    from pymavlink import DFReader
+class _Fmt(NamedTuple):
+    """One FMT definition: type name, format characters, column names, record length [bytes]."""
 
-    class _IndexOnly(DFReader.DFReader_binary):
-        """DFReader_binary without its clock search (a whole-file walk when there is no GPS):
-        livesweep computes the time base itself."""
-
-        def init_clock(self):
-            self.clock = None
-
-    return _IndexOnly
+    name: str
+    fmt: str
+    columns: list
+    len: int
 
 
 def _text(b: bytes) -> str:
@@ -198,6 +200,29 @@ def _dtype(fmt: str) -> np.dtype:
     return np.dtype({"names": names, "formats": [_NP[c] for c in fmt]})
 
 
+def _fmt_problem(ftype: int, flen: int, name: str, fmt: str, cols: list[str]) -> str:
+    """Why an FMT record cannot define a message type ("" when it can)."""
+    if not (1 <= len(name) <= 4 and name.isascii() and name.isprintable()):
+        return f"name {name!r} is not 1-4 printable characters"
+    if any(c not in _NP for c in fmt):
+        return f"format {fmt!r} has characters DataFlash does not define"
+    if len(cols) != len(fmt):
+        return f"{len(cols)} column names for the {len(fmt)} fields of format {fmt!r}"
+    if _dtype(fmt).itemsize + 3 != flen:
+        return f"length {flen} does not match format {fmt!r} ({_dtype(fmt).itemsize + 3} bytes)"
+    if ftype == _FMT_TYPE and (name != "FMT" or flen != _FMT_LEN):
+        return f"type 128 must be FMT of length {_FMT_LEN}, got {name!r} of length {flen}"
+    return ""
+
+
+def _read_fmt(data: bytes, pos: int) -> tuple[int, int, _Fmt, str]:
+    """(type id, length, format, problem) of the FMT record at ``pos`` (problem "" when usable)."""
+    ftype, flen, name, fmt, cols = struct.unpack_from("<BB4s16s64s", data, pos + 3)
+    name, fmt, cols = _text(name), _text(fmt), _text(cols)
+    columns = cols.split(",") if cols else []
+    return ftype, flen, _Fmt(name, fmt, columns, flen), _fmt_problem(ftype, flen, name, fmt, columns)
+
+
 def _check_head(src: Path, data: bytes) -> None:
     if not data:
         raise LogFormatError(f"{src}: the file is empty, not a DataFlash log")
@@ -207,73 +232,118 @@ def _check_head(src: Path, data: bytes) -> None:
     if len(data) < _FMT_LEN:
         raise LogFormatError(f"{src}: corrupt DataFlash header: the file ({len(data)} bytes) is shorter than its "
                              f"first FMT record ({_FMT_LEN} bytes)")
-    ftype, flen, name, fmt, cols = struct.unpack_from("<BB4s16s64s", data, 3)
-    name, fmt, cols = _text(name), _text(fmt), _text(cols)
-    why = ""
-    if not (1 <= len(name) <= 4 and name.isascii() and name.isprintable()):
-        why = f"name {name!r} is not 1-4 printable characters"
-    elif not fmt or any(c not in _NP for c in fmt):
-        why = f"format {fmt!r} has characters DataFlash does not define"
-    elif len(cols.split(",")) != len(fmt):
-        why = f"{len(cols.split(','))} column names for the {len(fmt)} fields of format {fmt!r}"
-    elif _dtype(fmt).itemsize + 3 != flen:
-        why = f"length {flen} does not match format {fmt!r} ({_dtype(fmt).itemsize + 3} bytes)"
-    elif ftype == _FMT_TYPE and (name != "FMT" or flen != _FMT_LEN):
-        why = f"type 128 must be FMT of length {_FMT_LEN}, got {name!r} of length {flen}"
+    _, _, f, why = _read_fmt(data, 0)
+    if not f.fmt and not why:
+        why = "its format is empty"
     if why:
         raise LogFormatError(f"{src}: corrupt DataFlash header: the first record (FMT, A3 95 80) does not define a "
                              f"message type: {why}")
 
 
-@contextlib.contextmanager
-def _captured_output():
-    """Collect what pymavlink prints while indexing (its Python prints and the Cython indexer's
-    C-level ones on file descriptor 2), instead of flooding the terminal; yields a list that
-    holds the text afterwards."""
-    import os
-    import sys
-    import tempfile
+@dataclass
+class _Index:
+    """Where the records of a DataFlash file are, and what is not a record.
 
-    result: list[str] = []
-    py_out = io.StringIO()
-    try:
-        sys.stderr.flush()
-        saved = os.dup(2)
-    except (OSError, ValueError, AttributeError):      # no real stderr (embedded): Python-level only
-        with contextlib.redirect_stderr(py_out), contextlib.redirect_stdout(py_out):
-            yield result
-        result.append(py_out.getvalue())
+    Attributes
+    ----------
+    formats : dict[int, _Fmt]
+        Usable FMT definitions by type id (the first one of each type wins).
+    offsets : dict[int, list[int]]
+        Byte offsets of the complete records of every usable type, in file order.
+    unusable : dict[int, str]
+        Type ids whose FMT is unusable (framed by its length, not decoded) and why.
+    unusable_records : int
+        Records of those types, and FMT records that contradict an earlier one.
+    garbage : list of (int, int)
+        Runs of bytes that are no record: (offset, length).
+    tail : (int, int) or None
+        A record cut by the end of the file: (offset, bytes present).
+    """
+
+    formats: dict
+    offsets: dict
+    unusable: dict = field(default_factory=dict)
+    unusable_records: int = 0
+    garbage: list = field(default_factory=list)
+    tail: tuple | None = None
+
+    @property
+    def record_bytes(self) -> int:
+        """Bytes of the records that are decoded."""
+        return sum(len(o) * self.formats[t].len for t, o in self.offsets.items())
+
+
+def _index(data: bytes) -> _Index:
+    """Frame every record of ``data``, resynchronising past corruption.
+
+    A record is ``A3 95 <type>`` plus the length the type's FMT gives. In sync, records follow one
+    another, as DFReader reads them. Anything else (flipped or zeroed bytes, a header overwritten,
+    a type without an FMT, an FMT record that is unusable and not followed by a record, so that
+    it would swallow the next one) starts a run of garbage, which ends at the next
+    ``A3 95 <known type>`` whose record is followed by another record header (or the end of the
+    file), so a header pattern inside a payload does not restart the framing.
+    """
+    fmt_default = _Fmt("FMT", "BBnNZ", ["Type", "Length", "Name", "Format", "Columns"], _FMT_LEN)
+    idx = _Index(formats={_FMT_TYPE: fmt_default}, offsets={})
+    lengths = {_FMT_TYPE: _FMT_LEN}
+    n = len(data)
+    pos, garbage_from = 0, None
+
+    def follows(p: int) -> bool:
+        return p >= n - 1 or (data[p] == 0xA3 and data[p + 1] == 0x95)
+
+    while pos < n:
+        mtype = data[pos + 2] if pos + 2 < n and data[pos] == 0xA3 and data[pos + 1] == 0x95 else None
+        length = lengths.get(mtype)
+        if (length is not None and pos + length > n) or (n - pos < 3 and _HEAD.startswith(data[pos:])):
+            if garbage_from is not None:                # a record cut by the end of the file
+                idx.garbage.append((garbage_from, pos - garbage_from))
+            idx.tail = (pos, n - pos)
+            return idx
+        fmt = _read_fmt(data, pos) if mtype == _FMT_TYPE else None
+        if length is not None and not follows(pos + length):
+            trusted = garbage_from is None and not (fmt is not None and fmt[3])
+        else:
+            trusted = length is not None
+        if not trusted:
+            if garbage_from is None:
+                garbage_from = pos
+            nxt = data.find(_HEAD, pos + 1)
+            pos = n if nxt < 0 else nxt
+            continue
+        if garbage_from is not None:
+            idx.garbage.append((garbage_from, pos - garbage_from))
+            garbage_from = None
+        if fmt is not None:
+            _define(idx, lengths, *fmt)
+        if mtype in idx.formats and not (fmt is not None and fmt[3]):
+            idx.offsets.setdefault(mtype, []).append(pos)
+        else:
+            idx.unusable_records += 1
+        pos += length
+    if garbage_from is not None:
+        idx.garbage.append((garbage_from, n - garbage_from))
+    return idx
+
+
+def _define(idx: _Index, lengths: dict, ftype: int, flen: int, f: _Fmt, why: str) -> None:
+    """Take one FMT record into the index: the first usable definition of a type wins; an
+    unusable one still frames its type's records (by its length) when the type has none yet."""
+    if ftype in idx.formats:
+        if idx.formats[ftype] != f:
+            idx.unusable_records += 1
+            idx.unusable.setdefault(ftype, f"an FMT record redefines {idx.formats[ftype].name} (type {ftype}) "
+                                           f"differently ({why or f.name + ' ' + repr(f.fmt)}); the first kept")
         return
-    with tempfile.TemporaryFile() as tmp:
-        os.dup2(tmp.fileno(), 2)
-        try:
-            with contextlib.redirect_stderr(py_out), contextlib.redirect_stdout(py_out):
-                yield result
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-            tmp.seek(0)
-            result.append(tmp.read(1 << 16).decode("utf-8", "replace") + py_out.getvalue())
-
-
-def _index(src: Path):
-    """DFReader_binary's index of ``src``: (formats, offsets per type id, what it printed)."""
-    cls = _reader_class()
-    with _captured_output() as printed:
-        try:
-            reader = cls(str(src))
-        except Exception as e:  # noqa: BLE001 - DFReader raises bare Exceptions on bad FMT records
-            raise LogFormatError(f"{src}: corrupt DataFlash log: pymavlink's DFReader cannot index it "
-                                 f"({type(e).__name__}: {e})") from e
-    try:
-        formats = {t: f for t, f in reader.formats.items()}
-        offsets = {t: np.asarray(reader.offsets[t], dtype=np.int64) for t in range(256) if reader.offsets[t]}
-    finally:
-        with contextlib.suppress(Exception):
-            reader.data_map.close()
-        with contextlib.suppress(Exception):
-            reader.filehandle.close()
-    return formats, offsets, "".join(printed)
+    if ftype in idx.unusable:
+        return
+    if why:
+        idx.unusable[ftype] = f"unusable FMT for type {ftype} ({why})"
+        if flen >= 3:
+            lengths[ftype] = flen
+        return
+    idx.formats[ftype] = f
+    lengths[ftype] = flen
 
 
 def _decode_raw(buf: np.ndarray, offsets: np.ndarray, length: int, dtype: np.dtype) -> np.ndarray:
@@ -422,7 +492,7 @@ def _time_us(t: _Type) -> np.ndarray | None:
     if raw.dtype.kind not in "iu":
         return None
     x = raw.astype(np.float64) * scale          # range check first: uint64 garbage would wrap in int64
-    ok = (x >= 0) & (x <= _MAX_BOOT_US)
+    ok = (x >= 0) & (x <= MAX_BOOT_US)
     return np.where(ok, raw.astype(np.int64) * scale, -1)
 
 
@@ -470,7 +540,27 @@ def _firmware(types: dict[int, _Type]) -> str:
     return ""
 
 
-def convert_dataflash(src, out, *, gps_time: bool = True, **options) -> ConversionResult:
+def _percent(part: int, whole: int) -> str:
+    pct = 100 * part / whole
+    return f"{pct:.2f} %" if pct >= 0.01 else "< 0.01 %"
+
+
+def _check_coverage(src: Path, idx: _Index, n_bytes: int, partial: bool) -> None:
+    """LogFormatError, before anything is written, when less than MIN_RECORD_FRACTION of the file's
+    bytes are records that can be converted (unless ``partial``)."""
+    read = idx.record_bytes
+    if partial or read >= MIN_RECORD_FRACTION * n_bytes:
+        return
+    lost = sum(length for _, length in idx.garbage)
+    first = f", first at offset {idx.garbage[0][0]}" if idx.garbage else ""
+    raise LogFormatError(
+        f"{src}: only {_percent(read, n_bytes)} of the file ({read} of {n_bytes} bytes) reads as DataFlash records "
+        f"that can be converted ({lost} bytes of corruption in {len(idx.garbage)} runs{first}; "
+        f"{idx.unusable_records} records without a usable FMT): nothing converted; pass --partial to convert what is "
+        "readable")
+
+
+def convert_dataflash(src, out, *, gps_time: bool = True, partial: bool = False, **options) -> ConversionResult:
     """Convert the DataFlash / sdlog2 log ``src`` to the MCAP file ``out`` (see the module docstring).
 
     Parameters
@@ -479,6 +569,10 @@ def convert_dataflash(src, out, *, gps_time: bool = True, **options) -> Conversi
     gps_time : bool
         Shift ``log_time`` to UNIX time with the log's first GPS time (default); False keeps
         boot-relative times.
+    partial : bool
+        Convert even when less than ``MIN_RECORD_FRACTION`` of the file's bytes are records
+        that can be converted (the default refuses, so a badly damaged log never passes for a
+        whole one).
 
     Returns
     -------
@@ -487,20 +581,23 @@ def convert_dataflash(src, out, *, gps_time: bool = True, **options) -> Conversi
     Raises
     ------
     LogFormatError
-        ``src`` missing, empty, not DataFlash or with a corrupt header (naming the file), or
-        ``out`` cannot be written; nothing is left at ``out`` then.
+        ``src`` missing, empty, not DataFlash or with a corrupt header (naming the file), less
+        than ``MIN_RECORD_FRACTION`` of it converts (without ``partial``; the message gives
+        the fraction and where the corruption starts), or ``out`` cannot be written; nothing is
+        left at ``out`` then.
     ConfigError
         An option this converter does not take.
     """
     src, out = Path(src), Path(out)
-    refuse_options(src, "a DataFlash log", options, "gps_time only")
+    refuse_options(src, "a DataFlash log", options, "gps_time and partial only")
     try:
         data = src.read_bytes()
     except OSError as e:
         raise LogFormatError(f"{src}: cannot be read: {e.strerror or e}") from None
     _check_head(src, data)
-    formats, offsets, chatter = _index(src)
+    idx = _index(data)
     n_bytes = len(data)
+    _check_coverage(src, idx, n_bytes, partial)
     buf = np.frombuffer(data, dtype=np.uint8)
 
     warnings: list[str] = []
@@ -512,56 +609,30 @@ def convert_dataflash(src, out, *, gps_time: bool = True, **options) -> Conversi
 
     # ---- decode every type, column-wise
     types: dict[int, _Type] = {}
-    spans = []              # (offset, end) of every record DFReader indexed, for the damage check
-    for tid, offs in offsets.items():
-        f = formats.get(tid)
-        if f is None:
-            continue
-        fmt = "".join(f.format) if not isinstance(f.format, str) else f.format
-        t = _Type(tid, f.name, fmt, list(f.columns))
-        length = int(f.len)
-        spans.append(np.stack([offs, offs + length], axis=1))
-        complete = offs[offs + length <= n_bytes]     # a cut last record is counted with the tail below
-        try:
-            dt = _dtype(fmt)
-            if dt.itemsize != length - 3 or len(fmt) != len(t.columns):
-                raise ValueError(f"format {fmt!r} packs {dt.itemsize} bytes and {len(fmt)} fields; FMT says "
-                                 f"{length - 3} bytes and {len(t.columns)} columns")
-        except (KeyError, ValueError, TypeError) as e:
-            skip("bad_format", int(complete.size), f"{complete.size} {t.name} records skipped: unusable FMT ({e})")
-            continue
-        t.offsets = complete
-        t.raw = _decode_raw(buf, complete, length, dt) if complete.size else np.zeros(0, dtype=dt)
+    for tid in sorted(idx.offsets):                 # channels in type-id order
+        f = idx.formats[tid]
+        t = _Type(tid, f.name, f.fmt, list(f.columns))
+        t.offsets = np.asarray(idx.offsets[tid], dtype=np.int64)
+        t.raw = _decode_raw(buf, t.offsets, f.len, _dtype(f.fmt))
         types[tid] = t
 
-    # ---- damage: bytes no record covers (between records, and a cut or garbage tail)
-    if spans:
-        sp = np.concatenate(spans)
-        sp = sp[np.argsort(sp[:, 0], kind="stable")]
-        ends = np.maximum.accumulate(sp[:, 1])
-        gap_from = np.concatenate([[0], ends[:-1]])
-        gaps = np.flatnonzero(sp[:, 0] > gap_from)
-        if gaps.size:
-            nbytes = int((sp[gaps, 0] - gap_from[gaps]).sum())
-            skip("garbage", int(gaps.size), f"{gaps.size} runs of bytes that are not DataFlash records skipped "
-                                            f"({nbytes} bytes, first at offset {int(gap_from[gaps[0]])})")
-        end = int(ends[-1])
-    else:
-        end = 0
-    if end > n_bytes:       # the last indexed record runs past the end of the file
-        skip("truncated_tail", 1, f"the log ends mid-message: the last record (at offset {int(sp[-1, 0])}) is cut; "
-                                  f"{n_bytes - int(sp[-1, 0])} bytes ignored")
-    elif end < n_bytes:
-        tail = data[end:]
-        if tail[:2] == _HEAD[: len(tail[:2])] and (len(tail) < 3 or tail[2] in formats):
-            skip("truncated_tail", 1, f"the log ends mid-message: {len(tail)} bytes of a cut record at offset {end} "
-                                      "ignored")
-        else:
-            skip("garbage", 1, f"{len(tail)} bytes after the last record (offset {end}) are not DataFlash records; "
-                               "ignored")
-    said = [ln for ln in chatter.splitlines() if ln.strip() and not ln.startswith("bad header")]
-    if said:       # "bad header" lines are the garbage counted above; anything else is news
-        warnings.append("pymavlink DFReader: " + said[0] + (f" (and {len(said) - 1} more lines)" if len(said) > 1 else ""))
+    # ---- damage: bytes no record covers, records no usable FMT describes, a cut last record
+    if idx.unusable_records:
+        skip("bad_format", idx.unusable_records, f"{idx.unusable_records} records not converted: "
+                                                 + "; ".join(idx.unusable.values()))
+    if idx.garbage:
+        nbytes = sum(length for _, length in idx.garbage)
+        skip("garbage", len(idx.garbage), f"{len(idx.garbage)} runs of bytes that are not DataFlash records skipped "
+                                          f"({nbytes} bytes, {_percent(nbytes, n_bytes)} of the file, first at "
+                                          f"offset {idx.garbage[0][0]})")
+    if idx.tail is not None:
+        at, have = idx.tail
+        skip("truncated_tail", 1, f"the log ends mid-message: the last record (at offset {at}) is cut; {have} bytes "
+                                  "ignored" if have >= 3 else
+                                  f"the log ends mid-message: {have} bytes of a cut record at offset {at} ignored")
+    if partial and idx.record_bytes < MIN_RECORD_FRACTION * n_bytes:
+        warnings.append(f"only {_percent(idx.record_bytes, n_bytes)} of the file's bytes are converted records "
+                        "(converted as asked, --partial)")
 
     # ---- values, units, multipliers
     unit_tab, mult_tab, fmtu = _lookup_tables(types)
@@ -598,7 +669,7 @@ def convert_dataflash(src, out, *, gps_time: bool = True, **options) -> Conversi
         vt[:] = 0
         warnings.append("no record carries a time stamp (TimeUS/TimeMS/TIME): every time is 0")
     if bad_time:
-        warnings.append(f"{bad_time} records with an impossible time stamp (over {_MAX_BOOT_US} us since boot) "
+        warnings.append(f"{bad_time} records with an impossible time stamp (over {MAX_BOOT_US} us since boot) "
                         "take the time of the record before them")
     offset_ns = _gps_offset_ns(types, order_pos, vt) if gps_time else None
     time_base = "gps" if offset_ns is not None else "boot"

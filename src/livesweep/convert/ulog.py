@@ -38,23 +38,29 @@ What is counted
 total duration in a warning); ``skipped["corrupt_data"]``: 1 when pyulog found corrupt data and
 resynchronised (how much was lost it cannot say: a warning says so);
 ``skipped["truncated_tail"]``: 1 when the file ends inside a message (the partial message is
-dropped, as pyulog does).
+dropped, as pyulog does); ``skipped["implausible_timestamp"]``: samples, text messages and
+parameter changes whose ``timestamp`` is beyond 10**15 us since boot (~32 years: a corrupt block
+pyulog read as data), dropped with a warning. A UTC offset that would put log times outside
+2000..2100 is not used (``log_time`` stays boot time, with a warning).
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 from pathlib import Path
 
 import numpy as np
 
-from livesweep.convert.common import ConversionResult, ConversionWriter, refuse_options
+from livesweep.convert.common import (MAX_BOOT_US, MIN_RECORD_FRACTION, UNIX_RANGE_S, ConversionResult,
+                                      ConversionWriter, refuse_options)
 from livesweep.errors import ConfigError, LogFormatError
 
 __all__ = ["convert_ulog", "ulog_topic_name"]
 
 _GPS_TOPICS = ("vehicle_gps_position", "sensor_gps")
-_UTC_MIN_US = 946_684_800 * 10**6          # 2000-01-01: anything below is "no fix yet"
+_UTC_MIN_US, _UTC_MAX_US = (s * 10**6 for s in UNIX_RANGE_S)   # below: "no fix yet"; above: corrupt
 _LOG_TOPIC = "/ulog/_logged_messages"
 _PARAM_TOPIC = "/ulog/_parameter_changes"
 _LEVELS = {0: "EMERG", 1: "ALERT", 2: "CRIT", 3: "ERR", 4: "WARNING", 5: "NOTICE", 6: "INFO", 7: "DEBUG"}
@@ -120,14 +126,20 @@ def _utc_offset_us(ulog) -> tuple[int, str]:
         for d in sorted((d for d in ulog.data_list if d.name == name), key=lambda d: d.multi_id):
             if "time_utc_usec" not in d.data:
                 continue
-            utc = d.data["time_utc_usec"].astype(np.int64)
-            ts = d.data["timestamp"].astype(np.int64)
-            ok = utc > _UTC_MIN_US
+            utc, ts = d.data["time_utc_usec"], d.data["timestamp"]
+            u = utc.astype(np.float64)                     # range checks in float: uint64 garbage wraps in int64
+            ok = (u > _UTC_MIN_US) & (u < _UTC_MAX_US) & _plausible_us(ts)
             if ok.any():
-                off = int(np.median(utc[ok] - ts[ok]))
+                off = int(np.median(utc[ok].astype(np.int64) - ts[ok].astype(np.int64)))
                 return off, (f"utc: {name} instance {d.multi_id} time_utc_usec - timestamp, median of "
                              f"{int(ok.sum())} samples")
     return 0, "boot: no GPS UTC time in the log; log_time is boot time"
+
+
+def _plausible_us(ts: np.ndarray) -> np.ndarray:
+    """Mask of boot times [us] in [0, MAX_BOOT_US]; larger ones are corrupt data read as a sample."""
+    t = np.asarray(ts).astype(np.float64)
+    return (t >= 0) & (t <= MAX_BOOT_US)
 
 
 def _format_version(ulog) -> str:
@@ -160,7 +172,27 @@ def _info_strings(info: dict) -> dict:
     return out
 
 
-def convert_ulog(src: Path, out: Path, *, topics=None, **options) -> ConversionResult:
+def _data_bytes(ulog) -> int:
+    """Bytes of the file that pyulog read as data samples (3-byte header, msg_id, fields)."""
+    return sum(len(d.data["timestamp"]) * (5 + sum(v.dtype.itemsize for v in d.data.values()))
+               for d in ulog.data_list)
+
+
+def _read_ulog(ULog, src: Path, topics):
+    """pyulog's reading of ``src``, what it printed (its warnings), and the tracked file."""
+    handle = _TrackedFile(src)
+    printed = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(printed):
+            ulog = ULog(handle, message_name_filter_list=topics, disable_str_exceptions=True)
+    except Exception as e:  # noqa: BLE001 - pyulog raises ULogException, struct.error, IndexError, ...
+        raise LogFormatError(f"{src}: not a readable ULog file: {type(e).__name__}: {e}") from e
+    finally:
+        handle.close()
+    return ulog, printed.getvalue(), handle
+
+
+def convert_ulog(src: Path, out: Path, *, topics=None, partial: bool = False, **options) -> ConversionResult:
     """Convert a PX4 ULog file to MCAP (channels, times and counts in the module docstring).
 
     Parameters
@@ -168,28 +200,33 @@ def convert_ulog(src: Path, out: Path, *, topics=None, **options) -> ConversionR
     src, out : Path
     topics : list of str, optional
         Convert only these uORB topics (pyulog's ``message_name_filter_list``); all by default.
+    partial : bool
+        Convert even when pyulog found corruption and less than
+        :data:`~livesweep.convert.common.MIN_RECORD_FRACTION` of the file's bytes are data
+        samples (by default that is refused: a damaged definitions section loses every sample).
+        The check needs every topic: with ``topics`` it is not made.
 
     Raises
     ------
     ConfigError
         pyulog is not installed, or an unknown option.
     LogFormatError
-        pyulog cannot read the file at all (bad header or definitions), naming the file.
+        pyulog cannot read the file at all (bad header or definitions), or found corruption and
+        read less than half of the file as data (without ``partial``), naming the file.
     """
-    refuse_options(src, "a ULog", options, "topics only")
+    refuse_options(src, "a ULog", options, "topics and partial only")
     ULog = _import_pyulog()
     src, out = Path(src), Path(out)
     if topics is not None:
         if isinstance(topics, str) or not all(isinstance(t, str) for t in topics):
             raise ConfigError(f"convert_ulog: topics must be a list of uORB topic names, got {topics!r}")
         topics = list(topics)
-    handle = _TrackedFile(src)
-    try:
-        ulog = ULog(handle, message_name_filter_list=topics, disable_str_exceptions=True)
-    except Exception as e:  # noqa: BLE001 - pyulog raises ULogException, struct.error, IndexError, ...
-        raise LogFormatError(f"{src}: not a readable ULog file: {type(e).__name__}: {e}") from e
-    finally:
-        handle.close()
+    ulog, said, handle = _read_ulog(ULog, src, topics)
+    size, read = src.stat().st_size, _data_bytes(ulog)
+    if ulog.file_corruption and read < MIN_RECORD_FRACTION * size and not partial and topics is None:
+        raise LogFormatError(f"{src}: pyulog found corruption and read only {100 * read / size:.1f} % of the file "
+                             f"({read} of {size} bytes) as data samples: nothing converted; pass --partial to convert "
+                             "what is readable")
 
     offset_us, time_source = _utc_offset_us(ulog)
     instances: dict[str, set] = {}
@@ -200,6 +237,7 @@ def convert_ulog(src: Path, out: Path, *, topics=None, **options) -> ConversionR
         w = cw.writer
         # -- gather every stream: (topic, field names, column lists, timestamps [µs])
         streams = []
+        implausible = 0
         seen_topic_fields: dict[str, tuple] = {}
         for d in ulog.data_list:
             topic = ulog_topic_name(d.name, d.multi_id, instances[d.name])
@@ -214,24 +252,32 @@ def convert_ulog(src: Path, out: Path, *, topics=None, **options) -> ConversionR
                 cw.warn(f"{topic}: subscribed twice with different fields; the second is written to {topic}~{k}")
                 topic = f"{topic}~{k}"
             seen_topic_fields[topic] = tuple(names)
-            arrays = {k: (d.data[k].astype(np.uint8) if d.data[k].dtype == bool else d.data[k]) for k in names}
+            keep = _plausible_us(d.data["timestamp"])
+            implausible += int(keep.size - keep.sum())
+            arrays = {k: (d.data[k].astype(np.uint8) if d.data[k].dtype == bool else d.data[k])[keep] for k in names}
             schema = {"type": "object", "title": f"ulog.{d.name}",
                       "properties": {k: _json_type(arrays[k].dtype) for k in names}}
             w.add_channel(topic, f"ulog.{d.name}", schema,
                           {"ulog_topic": d.name, "multi_id": str(int(d.multi_id)),
                            "timestamp": "us since boot", "fields": ",".join(names)})
-            ts = d.data["timestamp"].astype(np.int64)
+            ts = d.data["timestamp"][keep].astype(np.int64)
             cols = [arrays[k].tolist() for k in names]
             streams.append((topic, names, cols, ts))
             cw.messages_read += len(ts)
 
         logged = []
         for m in ulog.logged_messages:
+            if not 0 <= int(m.timestamp) <= MAX_BOOT_US:
+                implausible += 1
+                continue
             logged.append((int(m.timestamp), {"timestamp": int(m.timestamp), "level": int(m.log_level),
                                               "level_name": _LEVELS.get(int(m.log_level) & 7, str(m.log_level)),
                                               "message": str(m.message)}))
         for tag, msgs in (ulog.logged_messages_tagged or {}).items():
             for m in msgs:
+                if not 0 <= int(m.timestamp) <= MAX_BOOT_US:
+                    implausible += 1
+                    continue
                 logged.append((int(m.timestamp), {"timestamp": int(m.timestamp), "level": int(m.log_level),
                                                   "level_name": _LEVELS.get(int(m.log_level) & 7, str(m.log_level)),
                                                   "message": str(m.message), "tag": int(tag)}))
@@ -244,7 +290,8 @@ def convert_ulog(src: Path, out: Path, *, topics=None, **options) -> ConversionR
                                "tag": {"type": "integer"}}},
                 {"timestamp": "us since boot"})
         params = [(int(t), {"timestamp": int(t), "name": str(n), "value": v if isinstance(v, (int, float)) else str(v)})
-                  for t, n, v in ulog.changed_parameters]
+                  for t, n, v in ulog.changed_parameters if 0 <= int(t) <= MAX_BOOT_US]
+        implausible += len(ulog.changed_parameters) - len(params)
         if params:
             w.add_channel(_PARAM_TOPIC, "ulog.parameter_change", {
                 "type": "object", "title": "ulog.parameter_change",
@@ -277,6 +324,10 @@ def convert_ulog(src: Path, out: Path, *, topics=None, **options) -> ConversionR
             w.write(topic, msg, log_time_ns=(t_us + offset_us) * 1000, publish_time_ns=t_us * 1000)
 
         # -- what was lost
+        if implausible:
+            cw.skip("implausible_timestamp", implausible)
+            cw.warn(f"{implausible} samples or messages with a timestamp beyond {MAX_BOOT_US} us since boot (corrupt "
+                    "data pyulog read as records) dropped")
         if ulog.dropouts:
             total_ms = sum(int(d.duration) for d in ulog.dropouts)
             cw.skip("dropout_events", len(ulog.dropouts))
@@ -284,8 +335,11 @@ def convert_ulog(src: Path, out: Path, *, topics=None, **options) -> ConversionR
                     f"(first at boot time {ulog.dropouts[0].timestamp / 1e6:.3f} s)")
         if ulog.file_corruption:
             cw.skip("corrupt_data", 1)
-            cw.warn("pyulog found corrupt data and resynchronised; the messages in the corrupt part are lost "
-                    "(their number is unknown)")
+            cw.warn(f"pyulog found corrupt data and resynchronised; the messages in the corrupt part are lost "
+                    f"(their number is unknown; {100 * read / size:.1f} % of the file's bytes read as data samples)")
+        lines = [ln for ln in said.splitlines() if ln.strip()]
+        if lines:
+            cw.warn("pyulog: " + lines[0] + (f" (and {len(lines) - 1} more lines)" if len(lines) > 1 else ""))
         want, got = handle.last_read
         if 0 < got < want or (want == 3 and got in (1, 2)):
             cw.skip("truncated_tail", 1)
