@@ -230,3 +230,15 @@ def test_resampled_record_size_is_checked_before_resampling(tmp_path):
     for w in (str(p), "spectral.sample_rate_hz = 1000.0", "record 'long'", "0.0 to 900000.0 s",
               f"{(900_000 * 1000 + 1) * 2} samples x signals", str(limits.MAX_RECORD_VALUES)):
         assert w in msg, (w, msg)
+
+
+@pytest.mark.parametrize("value", [math.inf, math.nan, 0.0, -1.0, "x", True])
+def test_residual_min_evidence_must_be_finite_and_positive(tmp_path, value):
+    from types import SimpleNamespace
+
+    from livesweep.ident.residual import KINDS
+    from livesweep.pipeline.residual import residual_settings
+
+    case = SimpleNamespace(path=tmp_path / "case.toml", tables={"residual": {"min_evidence": {KINDS[0]: value}}})
+    with pytest.raises(ConfigError, match=f"min_evidence.{KINDS[0]} = .*finite positive"):
+        residual_settings(case)

@@ -14,6 +14,7 @@ Verification records of the case (``[[verify]]``) drive the time-domain test of 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from livesweep.config import Case, require_table
@@ -59,8 +60,8 @@ def residual_settings(case: Case) -> dict:
     for k, v in me.items():
         if k not in KINDS:
             raise ConfigError(f"{where}.min_evidence.{k}: unknown effect kind; known: {', '.join(KINDS)}")
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
-            raise ConfigError(f"{where}.min_evidence.{k} = {v!r}: must be a positive number")
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < math.inf:
+            raise ConfigError(f"{where}.min_evidence.{k} = {v!r}: must be a finite positive number")
     return {"enabled": enabled, "max_steps": steps, "kinds": list(kinds),
             "min_evidence": {**MIN_EVIDENCE, **{k: float(v) for k, v in me.items()}}}
 
