@@ -348,3 +348,53 @@ def test_replay_skips_and_counts_damaged_messages(tmp_path):
     assert src.counts["skipped_messages"] == 3
     assert summary["frames"] == len(t) and pipe.aligner.counts["samples"] == 2 * len(t)
     assert np.median(pipe.estimates[-1].coherence[0, 0]) > 0.99
+
+
+def test_slow_analysis_sheds_frames_but_the_recording_keeps_every_one(tmp_path):
+    """A view that takes 50 ms per call stands for an analysis that cannot keep up: the frames it
+    cannot take are skipped and counted, and every frame is still in the recording."""
+    from livesweep.config import load_channel_map
+    from livesweep.monitor.pipeline import MonitorPipeline, MonitorSettings
+    from livesweep.telemetry.mavlink_in import MavlinkSource
+
+    class SlowView:
+        def log_timeseries(self, *a, **k):
+            time.sleep(0.05)
+
+        def log_estimate(self, *a, **k):
+            time.sleep(0.05)
+
+        def log_alerts(self, *a, **k):
+            pass
+
+        def close(self):
+            pass
+
+    signals, _ = load_channel_map(Path(__file__).resolve().parents[1] / "config" / "xv15_channels.toml")
+    st = MonitorSettings(signals=signals, inputs=("da",), outputs=("p",), band_rad_s=(1.0, 20.0), window_s=30.0,
+                         segment_s=10.0)
+    src = MavlinkSource("udpin:127.0.0.1:0")
+    port = src.local_address[1]
+    out = tmp_path / "slow.mcap"
+    pipe = MonitorPipeline(st, [src], recorder=McapRecorder(out), view=SlowView(), queue_limit=500)
+    v = Vehicle(1, None)
+    frames = sim_stream(8, 40.0)
+    done = []
+
+    def stop():
+        if not done:
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+                for i, (name, rec) in enumerate(frames):
+                    s.sendto(v.pack(name, rec), ("127.0.0.1", port))
+                    if i % 500 == 499:
+                        time.sleep(0.02)
+            done.append(time.monotonic())
+        return time.monotonic() - done[0] > 1.0
+
+    summary = pipe.run(stop=stop)
+    assert sum(v for k, v in read_summary(out).message_counts.items() if k.startswith("/mavlink/")) == len(frames)
+    assert summary["frames"] == len(frames)
+    wanted = {signals[n].topic for n in ("da", "p")}               # what the analysis takes
+    n_wanted = sum(1 for name, _ in frames if f"/mavlink/{name}" in wanted)
+    shed = summary["counters"]["pipeline"]["analysis_shed"]
+    assert shed > 0 and summary["counters"]["pipeline"]["frames_analysed"] + shed == n_wanted

@@ -66,14 +66,16 @@ class FrameQueue:
             self._n += len(frames)
             self._cv.notify_all()
 
-    def get(self, timeout_s: float) -> list:
-        """Every queued frame (possibly none after ``timeout_s`` [s])."""
+    def get(self, timeout_s: float, max_frames: int = 5_000) -> list:
+        """Queued frames, oldest first: whole batches up to about ``max_frames`` (possibly none
+        after ``timeout_s`` [s]), so one turn of the analysis loop stays short."""
         with self._cv:
             if not self._items and not self._closed:
                 self._cv.wait(timeout_s)
-            out = [f for batch in self._items for f in batch]
-            self._items.clear()
-            self._n = 0
+            out: list = []
+            while self._items and (not out or len(out) + len(self._items[0]) <= max_frames):
+                out.extend(self._items.popleft())
+            self._n -= len(out)
             self._cv.notify_all()
             return out
 
