@@ -318,3 +318,23 @@ def test_identify_on_a_crafted_number_is_one_line_exit_2(tmp_path):
                         str(tmp_path / "rep"), "--stage", "frequency-response"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 2 and "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert "field 'u' of message 123" in r.stderr and "float64 range" in r.stderr and "big.mcap" in r.stderr
+
+
+def test_columns_decoded_in_batches_equal_mcaps_reader_and_name_the_right_message(tmp_path, monkeypatch):
+    import livesweep.telemetry.mcap_log as mcap_log
+    from mcap.reader import make_reader
+
+    monkeypatch.setattr(mcap_log, "_DECODE_BATCH", 64)
+    payloads = [json.dumps({"x": k * 0.25, "y": None if k % 9 == 0 else -k}).encode() for k in range(300)]
+    path = _write_raw(tmp_path / "batches.mcap", payloads)
+    got = read_fields(path, "/a", ["x", "y"])
+    with open(path, "rb") as f:
+        ref = [json.loads(m.data) for _s, _c, m in make_reader(f).iter_messages(log_time_order=True)]
+    np.testing.assert_array_equal(got["x"], [r["x"] for r in ref])
+    np.testing.assert_array_equal(got["y"], [np.nan if r["y"] is None else r["y"] for r in ref])
+    payloads[250] = b'{"x": 1e999, "y": 0}'
+    with pytest.raises(LogFormatError, match=f"field 'x' of message 250 \\(log_time {T0 + 250 * DT} ns\\)"):
+        read_fields(_write_raw(tmp_path / "bad.mcap", payloads), "/a", ["x"])
+    payloads[250] = b'{"y": 0}'
+    with pytest.raises(LogFormatError, match=f"field 'x' is missing from message 250 \\(log_time {T0 + 250 * DT} ns\\)"):
+        read_fields(_write_raw(tmp_path / "gap.mcap", payloads), "/a", ["x"])

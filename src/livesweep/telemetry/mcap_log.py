@@ -1279,11 +1279,10 @@ def read_fields(
     return read_topics_fields(path, {topic: list(fields)}, time, missing=missing)[topic]
 
 
-def _topic_objects(src: _Source, topics: list[str]) -> dict[str, tuple[list[int], list[int], list[dict]]]:
-    """Per topic: log times, publish times and JSON objects, in file order.
+def _topic_messages(src: _Source, topics: list[str]) -> dict[str, tuple[list[int], list[int], list[bytes]]]:
+    """Per topic: log times, publish times and message bytes, in file order.
 
-    Finished files take the fast walk and decode each topic's messages as one JSON array (C speed);
-    anything else goes through the linear scan or mcap's reader.
+    Finished files take the fast walk; anything else goes through the linear scan or mcap's reader.
     """
     chans = {cid: c for cid, c in src.channels.items() if c.topic in topics}
     for c in chans.values():
@@ -1296,12 +1295,17 @@ def _topic_objects(src: _Source, topics: list[str]) -> dict[str, tuple[list[int]
         lt.append(log_t)
         pt.append(pub_t)
         datas.append(data)
-    return {t: (lt, pt, _objects(src.path, t, lt, datas)) for t, (lt, pt, datas) in raw.items()}
+    return raw
 
 
-def _objects(path: Path, topic: str, log_times: list[int], datas: list[bytes]) -> list[dict]:
-    """The JSON objects of one topic's messages: one C-speed decode of them all as an array, else
-    message by message, naming the first that is not a JSON object."""
+#: Messages decoded to Python objects at a time: their columns are kept, the objects dropped (a
+#: decoded message takes ten times its bytes, so a long log is never held decoded all at once).
+_DECODE_BATCH = 65_536
+
+
+def _objects(path: Path, topic: str, log_times: list[int], datas: list[bytes], first: int) -> list[dict]:
+    """The JSON objects of messages ``first, first + 1, ...`` of a topic: one C-speed decode of them
+    all as an array, else message by message, naming the first that is not a JSON object."""
     try:
         objs = json.loads(b"[" + b",".join(datas) + b"]")
     except (ValueError, RecursionError):
@@ -1309,12 +1313,24 @@ def _objects(path: Path, topic: str, log_times: list[int], datas: list[bytes]) -
     if objs is not None and len(objs) == len(datas) and all(type(o) is dict for o in objs):
         return objs
     out = []
-    for k, data in enumerate(datas):
+    for k, data in enumerate(datas, first):
         try:
             out.append(_json_object(data))
         except _BadMessage as bad:
             raise LogFormatError(f"{_at(path, topic, k, log_times[k])} {bad}") from None
     return out
+
+
+def _topic_columns(path: Path, topic: str, fields: list[str], missing: str, log_times: list[int],
+                   datas: list[bytes]) -> dict[str, np.ndarray]:
+    """float64 columns of ``fields`` over one topic's messages (file order), decoded a batch at a time."""
+    where = f"{path}: topic {topic!r}"
+    parts: dict[str, list[np.ndarray]] = {f: [np.zeros(0)] for f in fields}
+    for a in range(0, len(datas), _DECODE_BATCH):
+        objs = _objects(path, topic, log_times, datas[a:a + _DECODE_BATCH], a)
+        for f in fields:
+            parts[f].append(_column(objs, f, missing, where, log_times, a))
+    return {f: np.concatenate(p) for f, p in parts.items()}
 
 
 _MISSING = object()
@@ -1339,9 +1355,9 @@ def _not_a_number(col: list) -> tuple[int, str] | None:
     return None
 
 
-def _column(objs: list, field: str, missing: str, where: str, log_times: list[int]) -> np.ndarray:
-    """One float column of ``field`` over ``objs`` (null and recorded non-finite strings -> NaN);
-    errors name the message.
+def _column(objs: list, field: str, missing: str, where: str, log_times: list[int], first: int) -> np.ndarray:
+    """One float column of ``field`` over ``objs``, messages ``first, first + 1, ...`` of the topic
+    (null and recorded non-finite strings -> NaN); errors name the message.
 
     A value beyond the float64 range (a 400-digit integer, ``1e400``) is an error, not NaN: no
     sensor logs it, so it marks a damaged or crafted message, and the message is named so the
@@ -1354,8 +1370,8 @@ def _column(objs: list, field: str, missing: str, where: str, log_times: list[in
     if col.count(_MISSING):
         k = next(i for i, v in enumerate(col) if v is _MISSING)
         if missing == "error":
-            raise LogFormatError(f"{where}: field {field!r} is missing from message {k} (log_time {log_times[k]} ns); "
-                                 f"fields present: {quote(sorted(objs[k]))}")
+            raise LogFormatError(f"{where}: field {field!r} is missing from message {first + k} (log_time "
+                                 f"{log_times[first + k]} ns); fields present: {quote(sorted(objs[k]))}")
         col = [math.nan if v is _MISSING else v for v in col]
     if any(type(v) is str for v in col):               # recorded non-finite values: missing samples
         col = [math.nan if type(v) is str and v in NONFINITE_STRINGS else v for v in col]
@@ -1368,8 +1384,8 @@ def _column(objs: list, field: str, missing: str, where: str, log_times: list[in
         if bad is None:                  # numpy refused what each value alone passes: name the field
             raise LogFormatError(f"{where}: field {field!r}: the values cannot be read as float64 numbers")
         k, what = bad
-        raise LogFormatError(f"{where}: field {field!r} of message {k} (log_time {log_times[k]} ns) {what}: "
-                             f"{quote(col[k])}")
+        raise LogFormatError(f"{where}: field {field!r} of message {first + k} (log_time {log_times[first + k]} ns) "
+                             f"{what}: {quote(col[k])}")
     return arr
 
 
@@ -1494,13 +1510,13 @@ def read_topics_fields(
     for topic in requests:
         if topic not in present:
             raise LogFormatError(f"{src.path}: topic {topic!r} is not in the log; topics present: {present}")
-    gathered = _topic_objects(src, list(requests))
+    gathered = _topic_messages(src, list(requests))
     result = {}
     for topic, fields in requests.items():
-        log_t, pub_t, objs = gathered[topic]
-        where = f"{src.path}: topic {topic!r}"
+        log_t, pub_t, datas = gathered.pop(topic)
+        cols = _topic_columns(src.path, topic, fields, missing, log_t, datas)
         order = np.argsort(np.asarray(log_t, dtype=np.int64), kind="stable")
-        out = {f: _column(objs, f, missing, where, log_t)[order] for f in fields}
+        out = {f: cols[f][order] for f in fields}
         out["t_ns"] = np.asarray(log_t if time == "log" else pub_t, dtype=np.int64)[order]
         result[topic] = out
     if notes is not None:
