@@ -338,3 +338,29 @@ def test_columns_decoded_in_batches_equal_mcaps_reader_and_name_the_right_messag
     payloads[250] = b'{"y": 0}'
     with pytest.raises(LogFormatError, match=f"field 'x' is missing from message 250 \\(log_time {T0 + 250 * DT} ns\\)"):
         read_fields(_write_raw(tmp_path / "gap.mcap", payloads), "/a", ["x"])
+
+
+def test_a_truncated_verification_log_is_noted_too(tmp_path):
+    from livesweep.config import load_case
+    from livesweep.pipeline.parametric import VerificationRunner
+
+    full = _sweep_log(tmp_path / "full.mcap")
+    (tmp_path / "cut.mcap").write_bytes(full.read_bytes()[: int(full.stat().st_size * 0.7)])
+    n = _count_messages(tmp_path / "cut.mcap")
+    case_path = tmp_path / "case.toml"
+    case_path.write_text(CASE.format(log="full.mcap").replace('[signals.u]', '[[verify]]\nlog = "cut.mcap"\n\n[signals.u]'))
+    runner = VerificationRunner(load_case(case_path), 50.0, ["u"], ["y"])
+    assert len(runner.notes) == 1 and "cut.mcap" in runner.notes[0] and f"{n} messages read" in runner.notes[0]
+
+
+def test_recover_stops_at_a_damaged_chunk_instead_of_laundering_it(tmp_path):
+    bad, at = _crc_damaged(tmp_path)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(bad.read_bytes()[:at + 3000])                # unfinished, damaged chunk inside
+    rec = tmp_path / "rec.mcap"
+    n = recover(cut, rec)
+    xs = read_fields(rec, "/a", ["x"])["x"]
+    assert xs.size == n and np.all(xs < 1250.0) and n < 250      # nothing from the damaged chunk on
+    notes: list[str] = []
+    read_topics_fields(rec, {"/a": ["x"]}, notes=notes)
+    assert "CRCValidationError" in notes[0] and f"{n} messages kept" in notes[0]

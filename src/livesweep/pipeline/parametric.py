@@ -165,6 +165,7 @@ class VerificationStage:
     inputs: tuple
     outputs: tuple
     runner: object = None   # the VerificationRunner the results came from (records already loaded)
+    notes: tuple = ()       # verification logs that were unfinished or recovered
 
 
 class VerificationRunner:
@@ -184,8 +185,9 @@ class VerificationRunner:
         self.inputs, self.outputs = tuple(inputs), tuple(outputs)
         self.units = [case.signals[o].units if o in case.signals else "" for o in self.outputs]
         self.records = []
+        self.notes: list[str] = []          # logs that were unfinished or recovered
         for rec in case.verify:
-            data = load_record(case, (rec,), [*self.inputs, *self.outputs], sample_rate_hz)
+            data = load_record(case, (rec,), [*self.inputs, *self.outputs], sample_rate_hz, notes=self.notes)
             u = np.vstack([data.signal(n) for n in self.inputs])
             self.records.append((rec.label or rec.log.name, data.t_s, np.where(np.isfinite(u), u, 0.0),
                                  np.vstack([data.signal(n) for n in self.outputs]), data.all_valid()))
@@ -207,4 +209,5 @@ def run_verification_stage(case: Case, ss: StateSpaceStage, sample_rate_hz: floa
         return None
     model = ss.fit.model
     runner = VerificationRunner(case, sample_rate_hz, model.inputs, model.outputs)
-    return VerificationStage(tuple(runner(model, ss.fit.theta)), runner.inputs, runner.outputs, runner)
+    return VerificationStage(tuple(runner(model, ss.fit.theta)), runner.inputs, runner.outputs, runner,
+                             tuple(runner.notes))

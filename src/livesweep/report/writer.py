@@ -156,6 +156,7 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
         first = records[0] if records else {}
         report["verification"] = {**{k: first.get(k) for k in ("outputs", "j_rms", "passed", "guidelines")},
                                   "records": records}
+        report["data_quality"]["notes"] = list(report["data_quality"]["notes"]) + list(verification.notes)
     if residual is not None:
         stages.append("residual-loop")
         report["residual_loop"] = _residual_section(case, residual.loop, out, taken)

@@ -745,9 +745,9 @@ def _scan(path: Path) -> _Scan:
                  saw_footer and not tail_error)
 
 
-def _open(path: str | os.PathLike[str]) -> _Source:
-    """Check ``path`` is an MCAP file and decide how to read it."""
-    p = Path(path)
+def _check_file(p: Path) -> bool:
+    """LogFormatError unless ``p`` is a readable file starting with the MCAP magic; whether it also
+    ends with it (finished files do)."""
     if not p.exists():
         raise LogFormatError(f"MCAP log {p} does not exist")
     if not p.is_file():
@@ -766,7 +766,13 @@ def _open(path: str | os.PathLike[str]) -> _Source:
         raise LogFormatError(f"{p} is empty (0 bytes), not an MCAP file")
     if head != _MAGIC:
         raise LogFormatError(f"{p} is not an MCAP file (it does not start with the MCAP magic bytes)")
-    if tail == _MAGIC:
+    return tail == _MAGIC
+
+
+def _open(path: str | os.PathLike[str]) -> _Source:
+    """Check ``path`` is an MCAP file and decide how to read it."""
+    p = Path(path)
+    if _check_file(p):
         try:
             with open(p, "rb") as f:
                 summary = make_reader(f).get_summary()
@@ -1532,7 +1538,9 @@ def recover(path: str | os.PathLike[str], out_path: str | os.PathLike[str]) -> i
     header's profile and library are kept. A metadata record ``"livesweep.recover"`` notes the
     source file, the number of messages and where reading stopped. The output is written to
     ``<out_path>.partial`` and renamed, so it is finished or absent. Works on finished files too
-    (then it is a plain copy plus that record).
+    (then it is a plain copy plus that record). A chunk that fails its CRC check ends the copy
+    there, as a torn tail does (``stopped_at`` names it): damaged messages are never rewritten
+    into a file with fresh, valid CRCs.
 
     Parameters
     ----------
@@ -1548,7 +1556,7 @@ def recover(path: str | os.PathLike[str], out_path: str | os.PathLike[str]) -> i
     """
     src_p = Path(path)
     out_p = Path(out_path)
-    _open(src_p)  # existence / magic checks with clear errors
+    _check_file(src_p)  # existence / magic checks with clear errors (no scan: damage ends the copy below)
     if out_p.exists() and src_p.exists() and out_p.resolve() == src_p.resolve():
         raise LogFormatError(f"recover: output {out_p} is the input file; choose another path")
     tmp = out_p.with_name(out_p.name + ".partial")
@@ -1567,7 +1575,7 @@ def recover(path: str | os.PathLike[str], out_path: str | os.PathLike[str]) -> i
         # a schema and a channel always precede the channel's first message in the source.
         with open(src_p, "rb") as f:
             try:
-                for rec in StreamReader(f, skip_magic=False).records:
+                for rec in StreamReader(f, skip_magic=False, validate_crcs=True).records:
                     if isinstance(rec, Header):
                         if not started:
                             w.start(profile=rec.profile, library=rec.library)
