@@ -242,3 +242,37 @@ def test_residual_min_evidence_must_be_finite_and_positive(tmp_path, value):
     case = SimpleNamespace(path=tmp_path / "case.toml", tables={"residual": {"min_evidence": {KINDS[0]: value}}})
     with pytest.raises(ConfigError, match=f"min_evidence.{KINDS[0]} = .*finite positive"):
         residual_settings(case)
+
+
+def test_segment_transforms_in_blocks_equal_one_transform_of_all_segments(monkeypatch):
+    from numpy.lib.stride_tricks import sliding_window_view
+    from scipy.signal import CZT
+
+    import livesweep.spectral.transform as transform
+
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((3, 20_000))
+    n, fs = 1000, 100.0
+    starts = np.arange(0, 19_000, 200)
+    w = 0.5 - 0.5 * np.cos(2 * np.pi * np.arange(n) / n)
+    omega = transform.uniform_grid(0.5, 40.0, n / fs)
+    seg = sliding_window_view(x, n, axis=-1)[:, starts, :]                # every segment at once
+    seg = (seg - seg.mean(axis=-1, keepdims=True)) * w
+    step = omega[1] - omega[0]
+    ref = CZT(n, m=omega.size, w=np.exp(-1j * step / fs), a=np.exp(1j * omega[0] / fs))(seg, axis=-1)
+    for block in (2**24, 7000, 3000):                                     # one block, 2 and 1 segments
+        monkeypatch.setattr(transform, "_BLOCK_SAMPLES", block)
+        np.testing.assert_array_equal(transform.segment_transforms(x, starts, n, w, omega, fs), ref)
+
+
+def test_analysis_refuses_spectra_beyond_the_limit_before_transforming(monkeypatch):
+    import livesweep.spectral.analysis as analysis
+
+    rng = np.random.default_rng(1)
+    x = rng.standard_normal((2, 6000))
+    size = max(limits.window_spectra_values(2, 6000, 50.0, w, 0.8, (1.0, 10.0)) for w in (10.0, 20.0))
+    monkeypatch.setattr(analysis, "MAX_SPECTRAL_VALUES", size - 1)
+    with pytest.raises(ConfigError, match=f"s window .* needs {size} spectral values, more than {size - 1}"):
+        analysis.analyze(x, ["u", "y"], 50.0, ["u"], ["y"], (1.0, 10.0), windows_s=[10.0, 20.0])
+    monkeypatch.setattr(analysis, "MAX_SPECTRAL_VALUES", size)
+    assert analysis.analyze(x, ["u", "y"], 50.0, ["u"], ["y"], (1.0, 10.0), windows_s=[10.0, 20.0]).siso
