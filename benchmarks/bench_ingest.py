@@ -94,7 +94,7 @@ def monitor(speed: float, out: Path) -> dict:
     cpu = time.process_time() - cpu0
     s = read_summary(out / "ingest.mcap")
     recorded = sum(v for k, v in s.message_counts.items() if k.startswith("/mavlink/"))
-    lat = np.asarray(pipe.totals.latency_s[1:])   # the first waits for the first full segment
+    lat = np.asarray(list(pipe.totals.latency_s)[1:])   # the first waits for the first full segment
     return {"received": summary["frames"], "sent": sent_count(sim), "recorded": recorded, "cpu_s": cpu,
             "wall_s": summary["wall_s"], "estimates": summary["estimates"], "lat_p50": np.percentile(lat, 50),
             "lat_p99": np.percentile(lat, 99), "lat_max": lat.max(), "data_s": summary["data_s"],

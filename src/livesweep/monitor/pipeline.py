@@ -214,7 +214,7 @@ class MonitorPipeline:
         self._t_first: float | None = None
         self._t_data: float | None = None             # newest data time analysed [s]
         self.last_status = None
-        self._oldest_unlogged: float | None = None
+        self._oldest_unlogged: int | None = None      # receive time [ns] of the oldest frame not yet shown
         self._stop = threading.Event()
         self._ingest: Ingest | None = None
         self._t_start = time.monotonic()
@@ -261,8 +261,8 @@ class MonitorPipeline:
                 self.totals.analysed += len(frames)
                 self.totals.frames = ingest.received
                 self.analysis_shed = queue.shed
-                if frames and self._oldest_unlogged is None:
-                    self._oldest_unlogged = time.monotonic()
+                if frames and live and self._oldest_unlogged is None:
+                    self._oldest_unlogged = frames[0].receive_ns
                 pending += len(frames)
                 # align and estimate in batches: per-call costs (array conversions, Rerun calls) would
                 # otherwise be paid for every few frames a live socket delivers
@@ -364,8 +364,8 @@ class MonitorPipeline:
                                    rows, status.verdict, list(status.reasons))
             if status.alerts:
                 self.view.log_alerts(t_s, [(a.kind, a.message) for a in status.alerts])
-            if self._oldest_unlogged is not None:     # arrival of the oldest frame this estimate includes
-                self.totals.latency_s.append(time.monotonic() - self._oldest_unlogged)
+            if self._oldest_unlogged is not None:     # receipt of the oldest frame this estimate includes
+                self.totals.latency_s.append((time.time_ns() - self._oldest_unlogged) * 1e-9)
                 self._oldest_unlogged = None
         payload = self._payload(est, rows)
         if self.publisher is not None:
