@@ -263,7 +263,8 @@ def test_nonfinite_cells_and_backward_time_are_counted_rows_kept_in_file_order(w
     assert any("1 step(s) backwards" in w and "line 5" in w for w in res.warnings)
     msgs = sorted(read_messages(res.output), key=lambda m: m.sequence)
     assert [m.data["time"] for m in msgs] == [0.0, 0.02, 0.01, 0.03]        # file order
-    assert [m.data["de"] for m in msgs] == [0.1, None, None, 0.2]
+    assert [m.data["de"] for m in msgs] == [0.1, "NaN", "NaN", 0.2]        # the recording's non-finite convention
+    assert [m.data["q"] for m in msgs] == [0.2, 0.3, 0.4, "Infinity"]
     assert [m.log_time_ns for m in msgs] == [0, 20_000_000, 10_000_000, 30_000_000]
     meta = read_metadata(res.output)["conversion"]
     assert json.loads(meta["skipped"]) == res.skipped

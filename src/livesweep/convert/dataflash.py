@@ -87,6 +87,7 @@ import numpy as np
 from livesweep.convert.common import (MAX_BOOT_US, MIN_RECORD_FRACTION, UNIX_RANGE_S, ConversionResult,
                                       ConversionWriter, refuse_options)
 from livesweep.errors import LogFormatError
+from livesweep.numbers import float_json_schema
 
 __all__ = ["convert_dataflash"]
 
@@ -462,7 +463,7 @@ def _schema(t: _Type) -> dict:
         elif ch == "a":
             p = {"type": "array", "items": {"type": "integer"}, "minItems": 32, "maxItems": 32}
         elif ch in _FLOATS or name in t.mults:
-            p = {"type": ["number", "null"]}
+            p = float_json_schema()
         else:
             p = {"type": "integer"}
         p["description"] = desc

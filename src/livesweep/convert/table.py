@@ -41,7 +41,8 @@ way a file cut while being written ends).
 
 Counted
 -------
-``skipped["nonfinite_cells"]``: NaN/inf or empty cells in mapped columns, written as ``null``;
+``skipped["nonfinite_cells"]``: NaN/inf or empty cells in mapped columns, written as ``"NaN"`` /
+``"Infinity"`` / ``"-Infinity"`` (the recording's convention, :mod:`livesweep.numbers`);
 ``skipped["rows_nonfinite_time"]``: rows whose time is not finite (not written);
 time running backwards: counted in a warning, rows kept in file order.
 """
@@ -60,6 +61,7 @@ import numpy as np
 
 from livesweep.convert.common import ConversionResult, ConversionWriter, refuse_options, sniff_format
 from livesweep.errors import ConfigError, LogFormatError
+from livesweep.numbers import float_json_schema
 
 __all__ = ["convert_table", "load_column_map", "ColumnMap", "ColumnSpec", "read_table"]
 
@@ -549,7 +551,7 @@ def convert_table(src: Path, out: Path, column_map=None, **options) -> Conversio
                    + (f", {c.scale!r} * raw + {c.offset!r}" if (c.scale, c.offset) != (1.0, 0.0) else "")
                    for c, i in cols}
         schema = {"type": "object", "title": f"table.{name}",
-                  "properties": {f: {"type": ["number", "null"], **({"description": units[f]} if units[f] else {})}
+                  "properties": {f: float_json_schema(**({"description": units[f]} if units[f] else {}))
                                  for f in field_names}}
         w = cw.writer
         w.add_channel(topic, f"table.{name}", schema,

@@ -56,6 +56,7 @@ import numpy as np
 from livesweep.convert.common import (MAX_BOOT_US, MIN_RECORD_FRACTION, UNIX_RANGE_S, ConversionResult,
                                       ConversionWriter, refuse_options)
 from livesweep.errors import ConfigError, LogFormatError
+from livesweep.numbers import float_json_schema
 
 __all__ = ["convert_ulog", "ulog_topic_name"]
 
@@ -117,7 +118,7 @@ def ulog_topic_name(topic: str, multi_id: int, instances) -> str:
 def _json_type(dtype: np.dtype) -> dict:
     if dtype.kind in "iub":
         return {"type": "integer"}
-    return {"type": ["number", "null"]}
+    return float_json_schema()
 
 
 def _utc_offset_us(ulog) -> tuple[int, str]:
