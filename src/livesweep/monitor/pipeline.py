@@ -44,6 +44,8 @@ __all__ = ["MonitorSettings", "Estimate", "MonitorPipeline", "LINK_ANOMALIES"]
 PROCESS_EVERY_S = 0.02        # align and estimate at most this often [s of wall time] ...
 PROCESS_EVERY_FRAMES = 500    # ... unless this many frames are waiting
 REPORT_EVERY_S = 1.0          # link counters recorded and checked for alerts this often [s of wall time]
+TIMESERIES_EVERY_S = 0.2      # time series go to the view in batches this often [s of wall time]: each Rerun
+                              # call holds the interpreter, and one per 20 ms block slowed the recording thread
 QUEUE_LIMIT_FRAMES = 50_000   # frames waiting for the analysis at most (about 50 MB)
 SWITCH_INTERVAL_S = 0.001     # the GIL changes hands at least this often while the monitor runs
 
@@ -215,6 +217,8 @@ class MonitorPipeline:
         self._t_data: float | None = None             # newest data time analysed [s]
         self.last_status = None
         self._oldest_unlogged: int | None = None      # receive time [ns] of the oldest frame not yet shown
+        self._ts_buffer: list[tuple[np.ndarray, np.ndarray]] = []   # time series not yet sent to the view
+        self._ts_sent = -math.inf
         self._stop = threading.Event()
         self._ingest: Ingest | None = None
         self._t_start = time.monotonic()
@@ -292,6 +296,8 @@ class MonitorPipeline:
             try:
                 if pending:
                     self._process(time.monotonic())
+                if self.view is not None:
+                    self._flush_timeseries(time.monotonic(), force=True)
                 self._report(time.monotonic(), final=True)
             finally:
                 self.close()
@@ -302,6 +308,18 @@ class MonitorPipeline:
         """Every block the aligner has ready, through the estimator tick by tick."""
         while (block := self.aligner.pop_ready()) is not None:
             self._process_block(block, t_rx)
+        self._flush_timeseries(t_rx)
+
+    def _flush_timeseries(self, now: float, force: bool = False) -> None:
+        """Send the buffered time series to the view in one call per signal (every TIMESERIES_EVERY_S)."""
+        if not self._ts_buffer or (not force and now - self._ts_sent < TIMESERIES_EVERY_S):
+            return
+        t = np.concatenate([b[0] for b in self._ts_buffer])
+        values = np.concatenate([b[1] for b in self._ts_buffer], axis=1)
+        self._ts_buffer.clear()
+        self._ts_sent = now
+        self.view.log_timeseries(t, list(self.names), values,
+                                 ["output" if x in self.s.outputs else "input" for x in self.names])
 
     def _process_block(self, block, t_rx: float) -> None:
         self.totals.blocks += 1
@@ -310,8 +328,7 @@ class MonitorPipeline:
         t = block.t0_s + np.arange(n) / fs
         self._t_data = float(t[-1])
         if self.view is not None:
-            self.view.log_timeseries(t, list(self.names), block.values,
-                                     ["output" if x in self.s.outputs else "input" for x in self.names])
+            self._ts_buffer.append((t, block.values))
         if self._next_tick is None:
             self._next_tick = block.t0_s + self.s.update_period_s
             self._t_first = block.t0_s
@@ -409,6 +426,10 @@ class MonitorPipeline:
     def _report(self, now: float, final: bool = False) -> None:
         """Record the counters on ``/livesweep/link`` and raise a ``link`` alert for what grew."""
         self._last_report = now
+        for src in self.sources:
+            refresh = getattr(src, "refresh_kernel_drops", None)
+            if refresh is not None:
+                refresh()
         c = self.counters()
         counts = self._anomalies(c)
         grew = {k: v - self._seen_anomalies.get(k, 0) for k, v in counts.items() if v > self._seen_anomalies.get(k, 0)}

@@ -34,8 +34,9 @@ Nothing is dropped silently: every byte that does not become a frame is counted 
     clock_implausible      frames whose time stamp does not follow their stream's recent clock
                            (:class:`~livesweep.telemetry.clock.StampClock`): likewise
     kernel_drops           datagrams the kernel dropped because the socket buffer was full (UDP
-                           on Linux, ``SO_RXQ_OVFL``; the kernel stamps its count on the next
-                           datagram it queues, so drops show up with the next datagram read)
+                           on Linux: ``SO_RXQ_OVFL`` on every datagram read, and
+                           ``/proc/net/udp`` when :meth:`MavlinkSource.refresh_kernel_drops` is
+                           called, as the monitor does once a second and at close)
     bytes                  bytes read
 
 Signing (MAVLink 2): with ``signing_key`` set, every signed frame is checked here, not by
@@ -534,6 +535,32 @@ class MavlinkSource:
             return [self._conn.listen, *self._clients]
         return [self._conn.fd]
 
+    def refresh_kernel_drops(self) -> None:
+        """Read the UDP socket's drop count from ``/proc/net/udp`` (Linux).
+
+        The count the kernel stamps on datagrams only arrives with the next datagram queued, so
+        drops at the end of a burst stay unseen until more data comes; the monitor calls this
+        about once a second and before the socket is closed, so every drop is counted.
+        """
+        if self._kind != "udpin" or not _KERNEL_DROPS:
+            return
+        try:
+            inode = os.fstat(self._conn.port.fileno()).st_ino
+        except (OSError, ValueError):
+            return
+        for table in ("/proc/net/udp", "/proc/net/udp6"):
+            try:
+                with open(table) as f:
+                    next(f)
+                    for line in f:
+                        cols = line.split()
+                        if len(cols) >= 13 and cols[9] == str(inode):
+                            c = self._dec.counts
+                            c["kernel_drops"] = max(c["kernel_drops"], int(cols[12]))
+                            return
+            except (OSError, ValueError, StopIteration):
+                continue
+
     def _recv_udp(self) -> tuple[bytes, Any] | None:
         sock = self._conn.port
         try:
@@ -541,7 +568,8 @@ class MavlinkSource:
                 data, anc, _flags, addr = sock.recvmsg(65535, 64)
                 for level, kind, payload in anc:
                     if level == socket.SOL_SOCKET and kind == _SO_RXQ_OVFL and len(payload) >= 4:
-                        self._dec.counts["kernel_drops"] = struct.unpack("I", payload[:4])[0]
+                        c = self._dec.counts
+                        c["kernel_drops"] = max(c["kernel_drops"], struct.unpack("I", payload[:4])[0])
             else:  # pragma: no cover - not Linux
                 data, addr = sock.recvfrom(65535)
         except (BlockingIOError, InterruptedError):
@@ -671,6 +699,7 @@ class MavlinkSource:
         """Close the link (idempotent)."""
         if self._closed:
             return
+        self.refresh_kernel_drops()
         self._closed = True
         for sock in self._clients:
             try:
