@@ -32,6 +32,7 @@ from pathlib import Path
 from livesweep import __version__
 from livesweep.convert.common import sha256_of
 from livesweep.errors import ConfigError
+from livesweep.locks import folder_lock
 from livesweep.numbers import finite_or_none as _finite_or_none
 
 __all__ = ["find_cases", "fingerprint", "run_one", "run_batch", "summarize_report", "format_table",
@@ -514,8 +515,9 @@ def run_batch(cases, out_dir, *, stage: str = _DEFAULT_STAGE, workers: int | Non
     Raises
     ------
     ConfigError
-        An unknown stage, an unusable ``out_dir``, no dask installed or no scheduler at
-        ``dask_address``. A failing case never raises: its row says ``failed`` and why.
+        An unknown stage, an unusable ``out_dir`` (or one another batch is writing into), no dask
+        installed or no scheduler at ``dask_address``. A failing case never raises: its row says
+        ``failed`` and why.
     """
     from livesweep.cli import STAGES
 
@@ -531,6 +533,12 @@ def run_batch(cases, out_dir, *, stage: str = _DEFAULT_STAGE, workers: int | Non
         raise ConfigError(f"--out {str(out_dir)!r} cannot be created: {exc.strerror or exc}") from None
     if not os.access(out_dir, os.W_OK):
         raise ConfigError(f"--out {str(out_dir)!r} is not writable")
+    with folder_lock(out_dir):
+        return _run_locked(cases, out_dir, stage, workers, dask_address, progress, force)
+
+
+def _run_locked(cases, out_dir, stage, workers, dask_address, progress, force) -> list[dict]:
+    """:func:`run_batch` once the batch folder is made and locked."""
     _LOG_HASHES.clear()
     folders = _assign_folders(cases, out_dir)
     total = len(cases)

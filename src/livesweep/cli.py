@@ -213,17 +213,24 @@ STAGES = ("frequency-response", "transfer-functions", "state-space", "verificati
 def cmd_identify(args) -> int:
     """Identify from a case file: frequency responses, then (as the case defines them) transfer
     functions, state-space derivatives and time-domain verification."""
+    from livesweep.config import load_case
+    from livesweep.locks import folder_lock
+    from livesweep.report.writer import prepare_out_dir
+
+    with folder_lock(prepare_out_dir(args.out)):
+        return _identify(args, load_case(args.case))
+
+
+def _identify(args, case) -> int:
+    """The stages of ``cmd_identify`` (the output folder is prepared and locked)."""
     import time
 
-    from livesweep.config import load_case
     from livesweep.pipeline.frequency_response import run_frequency_response_stage
     from livesweep.pipeline.parametric import (run_state_space_stage, run_transfer_function_stage,
                                                run_verification_stage)
     from livesweep.pipeline.residual import residual_settings, run_residual_stage
-    from livesweep.report.writer import prepare_out_dir, write_frequency_report
+    from livesweep.report.writer import write_frequency_report
 
-    prepare_out_dir(args.out)
-    case = load_case(args.case)
     if case.tables.get("state_space"):          # bad model tables fail before any work
         from livesweep.ident.state_space import StateSpaceModel
 
