@@ -386,7 +386,10 @@ def _print_monitor_summary(summary: dict, out=sys.stdout) -> None:
         bad = {k: v for k, v in src.items() if k not in ("name", "received", "by_system", "bytes", "records", "samples")
                and v and not isinstance(v, dict)}
         gaps = sum((src.get("seq_gaps") or {}).values())
-        print(f"  {src['name']}: {sum(received.values())} frames" + (f" from systems {dict(sorted(systems.items()))}"
+        by_sys = sorted(systems.items(), key=lambda kv: -kv[1])
+        sys_text = ", ".join(f"{k}: {v}" for k, v in by_sys[:5]) + (f", ... ({len(by_sys)} systems)" if len(by_sys) > 5
+                                                                     else "")
+        print(f"  {src['name']}: {sum(received.values())} frames" + (f" from systems {{{sys_text}}}"
               if systems else "") + (f"; {gaps} lost (sequence gaps)" if gaps else "")
               + (f"; rejected or repaired: {bad}" if bad else "; nothing rejected"), file=out)
     pipe = counters.get("pipeline") or {}
