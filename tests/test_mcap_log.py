@@ -261,15 +261,20 @@ def test_atomic_with_block_exception_leaves_nothing(tmp_path):
         w.close()
 
 
-def test_abort_non_atomic_deletes_file(tmp_path):
+def test_abort_non_atomic_keeps_what_was_recorded(tmp_path):
+    """A live recording is never deleted: an abort (an exception, a failure while finishing)
+    leaves it unfinished, as a kill would, and it reads back."""
     path = tmp_path / "live.mcap"
     w = McapLogWriter(path, atomic=False, flush_every=1)
     w.add_channel("/x", "X", {"type": "object"})
-    w.write("/x", {"a": 1}, log_time_ns=1)
-    assert path.exists()
+    for k in range(500):
+        w.write("/x", {"a": k}, log_time_ns=k)
+    w.flush()
     w.abort()
     w.abort()
-    assert os.listdir(tmp_path) == []
+    assert os.listdir(tmp_path) == ["live.mcap"]
+    s = read_summary(path)
+    assert not s.complete and s.message_counts["/x"] == 500
 
 
 @pytest.mark.parametrize("atomic", [True, False])

@@ -24,7 +24,9 @@ Writing
   writes ``path`` directly and calls ``file.flush()`` every ``flush_every`` messages, so a
   killed process loses at most the open chunk (``chunk_size`` bytes, uncompressed) plus the
   messages since the last flush. Such an unfinished file can be read by the readers below
-  (``LogSummary.complete`` is False) and turned into a finished file by :func:`recover`.
+  (``LogSummary.complete`` is False) and turned into a finished file by :func:`recover`. A live
+  recording is never deleted: :meth:`McapLogWriter.abort`, an exception, or a failure while
+  finishing (a full disk) leave it unfinished on disk.
 
 Reading
 -------
@@ -226,9 +228,8 @@ class McapLogWriter:
     same bytes.
 
     Used as a context manager, a normal exit calls :meth:`close` and an exception calls
-    :meth:`abort` (which deletes the file in both modes) and re-raises. A live recorder that
-    wants to keep what it recorded on Ctrl-C must catch ``KeyboardInterrupt`` inside the block
-    (or call :meth:`close` itself).
+    :meth:`abort` and re-raises: the partial file is deleted in atomic mode, and kept unfinished
+    (readable, recoverable) in non-atomic mode.
     """
 
     def __init__(
@@ -537,7 +538,8 @@ class McapLogWriter:
         Raises
         ------
         LogFormatError
-            If the writer was aborted, or finishing fails (the file is then deleted).
+            If the writer was aborted, or finishing fails (atomic mode: the partial file is
+            deleted; non-atomic mode: the file is left unfinished, readable and recoverable).
         """
         if self._state == "closed":
             return self._path
@@ -559,7 +561,8 @@ class McapLogWriter:
                 os.replace(self._file_path, self._path)
         except OSError as e:
             self.abort()
-            raise LogFormatError(f"cannot finish MCAP log {self._path}: {e}") from e
+            kept = "" if self._atomic else "; it is left unfinished: livesweep's readers and recover() read it"
+            raise LogFormatError(f"cannot finish MCAP log {self._path}: {e}{kept}") from e
         except BaseException:
             self.abort()
             raise
@@ -567,8 +570,9 @@ class McapLogWriter:
         return self._path
 
     def abort(self) -> None:
-        """Close the file without finishing it and delete it (``<path>.partial`` in atomic mode,
-        ``path`` itself otherwise). No-op after :meth:`close` or a previous :meth:`abort`."""
+        """Close the file without finishing it. Atomic mode deletes ``<path>.partial``; non-atomic
+        mode (a live recording) keeps ``path`` unfinished, as a killed process would: what was
+        recorded is never deleted. No-op after :meth:`close` or a previous :meth:`abort`."""
         if self._state != "open":
             return
         self._state = "aborted"
@@ -578,10 +582,11 @@ class McapLogWriter:
             except OSError:
                 pass
             self._file = None
-        try:
-            os.unlink(self._file_path)
-        except FileNotFoundError:
-            pass
+        if self._atomic:
+            try:
+                os.unlink(self._file_path)
+            except FileNotFoundError:
+                pass
 
     def __enter__(self) -> McapLogWriter:
         return self
