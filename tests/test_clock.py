@@ -129,3 +129,113 @@ def test_the_aligner_memory_is_bounded_whatever_the_stamps_say():
     fb[1500] = Frame("/b", fb[1500].receive_ns, None, {"t": int(stamps[1500] + 116 * 86_400 * 10**6), "x": 0.0})
     longest = run_aligner(ahead, [f for pair in zip(fa, fb) for f in pair])
     assert longest <= 30 * 50 and ahead.counts["clock_rejected"] == 1 and ahead.counts["samples_invalid"] <= 2
+
+
+def test_one_stamp_a_few_seconds_ahead_neither_shifts_the_clock_nor_is_released():
+    """4 s ahead at 100 Hz is within what the receive clock allows (5 s of slack), yet one stamp must
+    not move the clock (it used to: the genuine stamps after it then re-anchored 5 s late)."""
+    c = StampClock(1e-6, establish=True)
+    raw = [10_000_000 + 10_000 * k for k in range(60)]
+    raw[30] += 4_000_000
+    t = feed_all(c, raw, dt_rx=0.01)
+    assert t[30] is None and c.rejected == 1 and c.resets == 0 and c.offset_s == 0.0
+    np.testing.assert_allclose([x for k, x in enumerate(t) if k != 30],
+                               [r * 1e-6 for k, r in enumerate(raw) if k != 30], atol=1e-9)
+
+
+def test_a_real_gap_releases_the_sample_after_it():
+    """The link drops 3 s: the first stamp after the gap is held until the next one goes on from it."""
+    c = StampClock(1e-6, establish=True)
+    raw = [10_000_000 + 10_000 * k for k in range(20)] + [13_200_000 + 10_000 * k for k in range(20)]
+    out = []
+    for k, r in enumerate(raw):
+        rx = k * 0.01 + (3.0 if k >= 20 else 0.0)
+        out += [idx for _, idx in c.feed(r, rx, k)]
+    assert out == list(range(40)) and c.rejected == 0 and c.resets == 0
+
+
+# ----------------------------------------------------------------------------- aligner: the frames alone decide
+
+
+def two_topics(lag_s=0.6, n=500, sysid=1):
+    """Signal a on /a and b on /b, 50 Hz, b's frames arriving lag_s after a's (a late link)."""
+    st = 1_000_000 + 20_000 * np.arange(n)
+    fa = [Frame("/a", int(k * 0.02e9), None, {"sysid": sysid, "compid": 1, "t": int(s), "x": np.sin(s * 1e-6)})
+          for k, s in enumerate(st)]
+    fb = [Frame("/b", int((k * 0.02 + lag_s) * 1e9), None, {"sysid": sysid, "compid": 1, "t": int(s),
+                                                           "x": np.cos(s * 1e-6)}) for k, s in enumerate(st)]
+    return sorted(fa + fb, key=lambda f: f.receive_ns)
+
+
+def blocks_with_pops_every(frames, every):
+    al = GridAligner({"a": spec("a", "/a"), "b": spec("b", "/b")}, ["a", "b"], 50.0)
+    out = []
+    for k, f in enumerate(frames):
+        al.push(f)
+        if (k + 1) % every == 0 or k == len(frames) - 1:
+            while (b := al.pop_ready()) is not None:
+                out.append(b)
+    return al, out
+
+
+def test_what_the_aligner_emits_does_not_depend_on_when_it_is_asked():
+    """The same frames, popped after every frame (a busy live link) and every 500 frames (a replay):
+    the same grid samples, the same values, the same gaps and late drops."""
+    frames = two_topics()
+    (a1, b1), (a2, b2) = blocks_with_pops_every(frames, 1), blocks_with_pops_every(frames, 500)
+    for al_blocks in (b1, b2):
+        assert al_blocks
+    v1, v2 = np.hstack([b.values for b in b1]), np.hstack([b.values for b in b2])
+    ok1, ok2 = np.concatenate([b.valid for b in b1]), np.concatenate([b.valid for b in b2])
+    assert b1[0].t0_s == b2[0].t0_s and v1.shape == v2.shape
+    np.testing.assert_array_equal(ok1, ok2)
+    np.testing.assert_array_equal(v1[:, ok1], v2[:, ok2])
+    assert a1.counts == a2.counts and ok1.mean() > 0.95
+
+
+def test_clocks_of_one_vehicle_re_anchor_together_at_a_reboot():
+    """A reboot seen on two messages at different rates (servo 50 Hz, IMU 100 Hz): both continue with
+    one offset, so the pair stays aligned to the sample across the reboot."""
+    al = GridAligner({"a": spec("a", "/a"), "b": spec("b", "/b")}, ["a", "b"], 50.0)
+    boot1 = 5_000_000 + 10_000 * np.arange(1000)              # 10 s of boot clock, then a reboot to 0.25 s
+    boot2 = 250_000 + 10_000 * np.arange(1000)
+    frames = []
+    for part, (stamps, rx0) in enumerate(((boot1, 0.0), (boot2, 12.0))):
+        for k, s in enumerate(stamps):
+            rx = rx0 + k * 0.01
+            frames.append(Frame("/b", int(rx * 1e9), None, {"sysid": 1, "compid": 1, "t": int(s), "x": float(s)}))
+            if k % 2 == 0:
+                frames.append(Frame("/a", int(rx * 1e9), None, {"sysid": 1, "compid": 1, "t": int(s), "x": float(s)}))
+    blocks = []
+    for f in frames:
+        al.push(f)
+        while (b := al.pop_ready()) is not None:
+            blocks.append(b)
+    v = np.hstack([b.values for b in blocks])
+    ok = np.concatenate([b.valid for b in blocks])
+    assert al.counts["resets"] == 2                            # one per clock, one shared offset
+    np.testing.assert_allclose(v[0, ok], v[1, ok], atol=1e-6)  # both carry their own stamp: equal when aligned
+    assert ok[-200:].all()
+
+
+def test_one_vehicle_is_analysed_even_when_topics_first_show_different_systems():
+    al = GridAligner({"a": spec("a", "/a"), "b": spec("b", "/b")}, ["a", "b"], 50.0)
+    one, two = two_topics(0.0, 300, sysid=1), two_topics(0.0, 300, sysid=2)
+    frames = [f for f in two if f.topic == "/b"][:5] + sorted(one + two, key=lambda f: f.receive_ns)
+    for f in frames:
+        al.push(f)
+    assert al.system == 2                                       # the first system seen on any mapped topic
+    assert al.counts["other_system"] == 600 and al.counts["frames_used"] == 605
+
+
+def test_dotted_fields_are_read_live_as_offline():
+    """``gyro.x`` and ``servo.1`` (nested objects, lists) reach the aligner as they reach read_fields."""
+    sigs = {"a": SignalSpec(name="a", topic="/n", field="gyro.x", stamp="t", stamp_scale=1e-6),
+            "b": SignalSpec(name="b", topic="/n", field="servo.1", stamp="t", stamp_scale=1e-6)}
+    al = GridAligner(sigs, ["a", "b"], 50.0)
+    for k in range(200):
+        al.push(Frame("/n", int(k * 0.02e9), None, {"t": 1_000_000 + 20_000 * k, "gyro": {"x": 0.5 * k},
+                                                    "servo": [0, 2.0 * k]}))
+    b = al.pop_ready()
+    assert b is not None and b.valid.all() and al.counts["missing_field"] == 0
+    np.testing.assert_allclose(b.values[1], 4 * b.values[0])

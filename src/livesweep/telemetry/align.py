@@ -5,32 +5,42 @@
   comparable).
 * **Stamps are checked before use.** Each (topic, stamp field) has its own
   :class:`~livesweep.telemetry.clock.StampClock`: a stamp that does not follow the stream's
-  recent clock (a corrupt or forged frame, a value from another epoch) is dropped and counted
-  (``clock_rejected``); the clock re-anchors (a reboot, a switch to UNIX time) only after several
-  consecutive stamps agree, and then continues ``reset_gap_s`` after the last sample, so no window
-  spans the discontinuity (``resets``). uint32 MAVLink time fields are unwrapped (``wraps``);
-  other fields never are. Each stream's first few stamps establish its clock (``clock_warmup``).
-* **One vehicle per topic.** MAVLink frames carry ``sysid``: the aligner follows the first system
-  it sees on each topic and counts frames of any other system (``other_system``) without mixing
-  them in (the recording keeps them all).
+  recent clock (a corrupt or forged frame, a value from another epoch, one stamp a few seconds
+  ahead) is dropped and counted (``clock_rejected``); the clock re-anchors (a reboot, a switch to
+  UNIX time) only after several consecutive stamps agree, and then continues ``reset_gap_s``
+  after the last sample, so no window spans the discontinuity (``resets``). All clocks of one
+  vehicle that re-anchor at one reboot take the same offset, so signals from different messages
+  stay aligned to the sample. uint32 MAVLink time fields are unwrapped (``wraps``); other fields
+  never are. Each stream's first few stamps establish its clock (they are held, then released
+  together), so a bad first stamp never becomes its reference.
+* **One vehicle.** MAVLink frames carry ``sysid`` and ``compid``: the aligner analyses the first
+  system it sees on any mapped topic, and on each topic the first component of that system; frames
+  of other systems and components are counted (``other_system``, ``other_component``) and left
+  out (the recording keeps them all), so one vehicle's inputs are never paired with another's
+  outputs.
 * **Multi-rate alignment.** Each signal keeps its recent samples; grid samples ``t0 + k/fs`` are
   emitted once every signal has reached them, by linear interpolation between the bracketing
   samples. Where the bracketing samples are further apart than ``max(max_interp_gap_s, 1.5 x the
-  signal's median spacing)`` the grid sample is marked invalid (a gap: excluded, never
-  interpolated across). A signal that stops while others go on for ``gap_timeout_s`` is marked
-  invalid from its last sample on, so one dead channel does not stall the others.
+  signal's spacing)`` (the median of its first four) the grid sample is marked invalid (a gap:
+  excluded, never interpolated across). A signal that stops while others go on for
+  ``gap_timeout_s`` is marked invalid from its last sample on, so one dead channel does not stall
+  the others. The grid starts once every signal has four samples.
+* **The frames alone decide.** How far the grid may go (the *frontier*) moves with every frame
+  pushed, and a sample that arrives for a time the frontier has passed is dropped and counted
+  (``late_dropped``), so what :meth:`GridAligner.pop_ready` emits depends on the frames and their
+  order only, never on when it is called or on wall-clock time: replaying a recording through the
+  same aligner reproduces the live blocks exactly.
 * **Bounded memory whatever the stamps say.** A block holds at most ``max_fill_s`` of grid (call
   :meth:`GridAligner.pop_ready` until it returns None); of a stretch where no signal has a sample
   (a jump of the clock) only the last ``max_fill_s`` is emitted, all of it invalid so the
   estimator's window is flushed, and the rest is skipped (``samples_skipped``); samples waiting for
   a signal that never arrived are kept for ``max_fill_s`` at most.
-
-Everything is driven by the frames' contents alone (never by wall-clock time), so replaying a
-recording through the same aligner reproduces the live blocks exactly.
 """
 
 from __future__ import annotations
 
+import bisect
+import functools
 import math
 from dataclasses import dataclass
 
@@ -40,10 +50,14 @@ from livesweep.config import SignalSpec
 from livesweep.errors import ConfigError
 from livesweep.telemetry.clock import StampClock
 from livesweep.telemetry.frames import Frame
+from livesweep.telemetry.mcap_log import get_field
 
 __all__ = ["AlignedBlock", "GridAligner", "as_number"]
 
 _EPS_S = 1e-7   # stamps within 0.1 us of a grid time are on it (grid times carry float round-off)
+_FIRST_SAMPLES = 4   # a signal's spacing is the median of its first few (the grid starts once all have one)
+_MISSING = object()
+_SAME_REBOOT_S = 10.0   # re-anchorings of one vehicle this close (offset and new stamps) are one reboot
 
 
 def as_number(raw) -> float | None:
@@ -85,12 +99,13 @@ class AlignedBlock:
 
 
 class _Channel:
-    __slots__ = ("t", "v", "dt")
+    __slots__ = ("t", "v", "dt", "first")
 
     def __init__(self):
         self.t: list[float] = []
         self.v: list[float] = []
-        self.dt: float | None = None
+        self.dt: float | None = None          # median spacing of the first samples [s]
+        self.first: list[float] = []          # the first few sample times, for dt
 
 
 class GridAligner:
@@ -107,7 +122,10 @@ class GridAligner:
     max_interp_gap_s : float
         Longest source-sample spacing bridged by interpolation.
     gap_timeout_s : float
-        How long the other signals may run ahead of a silent one before it is marked missing.
+        How long the other signals may run ahead of a silent one before it is marked missing [s].
+        Also the largest lag between topics that costs nothing (a message that arrives later
+        than this behind the others is late): 2 s, so a slow gateway or a second link does not
+        make a signal look dead.
     reset_gap_s : float
         Gap left in the continuous clock when a stream's clock re-anchors [s].
     max_fill_s : float
@@ -117,7 +135,7 @@ class GridAligner:
     """
 
     def __init__(self, signals: dict[str, SignalSpec], names, sample_rate_hz: float, *,
-                 max_interp_gap_s: float = 0.1, gap_timeout_s: float = 0.5, reset_gap_s: float = 1.0,
+                 max_interp_gap_s: float = 0.1, gap_timeout_s: float = 2.0, reset_gap_s: float = 1.0,
                  max_fill_s: float = 600.0):
         self.names = tuple(names)
         missing = [n for n in self.names if n not in signals]
@@ -143,44 +161,68 @@ class GridAligner:
         for n, s in self.specs.items():
             self.by_topic.setdefault(s.topic, []).append(n)
         self.clocks: dict[tuple[str, str], StampClock] = {}
-        self.systems: dict[str, int] = {}            # topic -> the system id followed
+        self.system = None                           # the system id analysed (the first seen)
+        self.components: dict[str, int] = {}          # topic -> the component id followed
+        self._reanchors: dict = {}                    # vehicle -> (offset [s], first new stamp [s]) of its last reboot
         self.reset_gap_s = reset_gap_s
         self.ch = {n: _Channel() for n in self.names}
         self.t0: float | None = None
-        self.next_k = 0
+        self.next_k = 0                  # next grid sample to emit
+        self.k_frontier = 0              # grid samples every signal has reached (emitted up to here)
+        self._frontier_t = -math.inf     # time of the last grid sample before the frontier [s]
         self.counts = {"frames_used": 0, "samples": 0, "missing_field": 0, "not_a_number": 0, "late_dropped": 0,
                        "reordered": 0, "wraps": 0, "resets": 0, "clock_rejected": 0,
-                       "other_system": 0, "samples_emitted": 0, "samples_invalid": 0, "samples_skipped": 0,
+                       "other_system": 0, "other_component": 0, "samples_emitted": 0, "samples_invalid": 0, "samples_skipped": 0,
                        "samples_expired": 0}
 
     # -- input ------------------------------------------------------------------------------
-    def _clock(self, topic: str, stamp: str, scale: float) -> StampClock:
-        key = (topic, stamp)
+    def _clock(self, frame: Frame, stamp: str, scale: float) -> StampClock:
+        key = (frame.topic, stamp)
         c = self.clocks.get(key)
         if c is None:
-            c = self.clocks[key] = StampClock(scale, wrap_units=_wrap_units(topic, stamp),
-                                              reset_gap_s=self.reset_gap_s, establish=True)
+            vehicle = frame.data.get("sysid", frame.topic)
+            c = self.clocks[key] = StampClock(scale, wrap_units=_wrap_units(frame.topic, stamp),
+                                              reset_gap_s=self.reset_gap_s, establish=True,
+                                              reanchor=functools.partial(self._reanchor, vehicle))
         return c
 
-    def _same_system(self, frame: Frame) -> bool:
+    def _reanchor(self, vehicle, first_s: float, offset_s: float) -> float:
+        """One offset for every clock of ``vehicle`` that re-anchors at one reboot (their proposals
+        differ by a sample period or so; a later reboot proposes an offset further on)."""
+        prev = self._reanchors.get(vehicle)
+        if prev is not None and abs(prev[0] - offset_s) <= _SAME_REBOOT_S and abs(prev[1] - first_s) <= _SAME_REBOOT_S:
+            return prev[0]
+        self._reanchors[vehicle] = (offset_s, first_s)
+        return offset_s
+
+    def _same_vehicle(self, frame: Frame) -> bool:
+        """The first system seen on any mapped topic is analysed, with the first component seen on
+        each topic; frames of other systems and components are counted and left out."""
         sysid = frame.data.get("sysid")
         if sysid is None:
             return True
-        first = self.systems.setdefault(frame.topic, sysid)
-        if sysid == first:
-            return True
-        self.counts["other_system"] += 1
-        return False
+        if self.system is None:
+            self.system = sysid
+        if sysid != self.system:
+            self.counts["other_system"] += 1
+            return False
+        compid = self.components.setdefault(frame.topic, frame.data.get("compid"))
+        if frame.data.get("compid") != compid:
+            self.counts["other_component"] += 1
+            return False
+        return True
 
     def _values(self, names, frame: Frame) -> list[tuple[str, float]]:
         """(name, value in signal units) of the signals ``frame`` carries; the rest counted."""
         out = []
         for n in names:
             spec = self.specs[n]
-            raw = frame.data.get(spec.field)
-            if raw is None and spec.field not in frame.data:
-                self.counts["missing_field"] += 1
-                continue
+            raw = frame.data.get(spec.field, _MISSING)
+            if raw is _MISSING:                        # a dotted path ("gyro.x", "servo.0"), as offline
+                found, raw = get_field(frame.data, spec.field) if "." in spec.field else (False, None)
+                if not found:
+                    self.counts["missing_field"] += 1
+                    continue
             v = as_number(raw)
             if v is None:
                 self.counts["not_a_number"] += 1
@@ -191,7 +233,7 @@ class GridAligner:
     def push(self, frame: Frame) -> None:
         """Take the samples a frame carries (frames of other topics are ignored)."""
         names = self.by_topic.get(frame.topic)
-        if not names or not isinstance(frame.data, dict) or not self._same_system(frame):
+        if not names or not isinstance(frame.data, dict) or not self._same_vehicle(frame):
             return
         self.counts["frames_used"] += 1
         by_stamp: dict[str | None, list[str]] = {}
@@ -206,7 +248,7 @@ class GridAligner:
                 if isinstance(raw, bool) or not isinstance(raw, (int, float)):
                     self.counts["missing_field"] += 1
                     continue
-                clock = self._clock(frame.topic, stamp, self.specs[group[0]].stamp_scale)
+                clock = self._clock(frame, stamp, self.specs[group[0]].stamp_scale)
                 before = (clock.wraps, clock.resets, clock.rejected)
                 released = clock.feed(raw, frame.receive_ns * 1e-9, values)
                 for key, b, a in zip(("wraps", "resets", "clock_rejected"), before,
@@ -215,41 +257,67 @@ class GridAligner:
             for t, vals in released:
                 for n, v in vals:
                     self._add(n, t, v)
+        self._advance()
 
     def _add(self, name: str, t: float, v: float) -> None:
         c = self.ch[name]
-        emitted_until = -math.inf if self.t0 is None else self.t0 + (self.next_k - 1) / self.fs
-        if t <= emitted_until:
+        if t <= self._frontier_t:
             self.counts["late_dropped"] += 1
             return
         if c.t and t <= c.t[-1]:
             if t == c.t[-1]:
                 return
-            i = int(np.searchsorted(c.t, t))
+            i = bisect.bisect_left(c.t, t)
             c.t.insert(i, t)
             c.v.insert(i, v)
             self.counts["reordered"] += 1
         else:
             c.t.append(t)
             c.v.append(v)
+        if c.dt is None:
+            c.first.append(t)
+            if len(c.first) >= _FIRST_SAMPLES:
+                c.dt = float(np.median(np.diff(sorted(c.first))))
+                c.first = []
         self.counts["samples"] += 1
+
+    def _advance(self) -> None:
+        """Move the grid frontier as far as every signal has reached (the frames pushed so far decide
+        it alone, not when :meth:`pop_ready` is called, so a replay emits what the live run did)."""
+        chans = [self.ch[n] for n in self.names]
+        if self.t0 is None:
+            if any(c.dt is None for c in chans):
+                self._expire(chans)
+                return
+            self.t0 = max(c.t[0] for c in chans)
+        lasts = [c.t[-1] for c in chans]
+        lo, hi = min(lasts), max(lasts)
+        # a signal silent for gap_timeout_s while others advance no longer holds the grid back
+        limit = lo if hi - lo <= self.gap_timeout_s else hi - self.gap_timeout_s
+        k = int(math.floor((limit - self.t0 + _EPS_S) * self.fs)) + 1
+        if k > self.k_frontier:
+            self.k_frontier = k
+            self._frontier_t = self.t0 + (k - 1) / self.fs
 
     # -- output -----------------------------------------------------------------------------
     def _expire(self, chans) -> None:
-        """While some signal has no sample yet, keep only the last ``max_fill_s`` of the others."""
+        """While some signal has not started, keep only the last ``max_fill_s`` of the others."""
         for c in chans:
             if c.t and c.t[-1] - c.t[0] > self.max_fill_s:
-                k = int(np.searchsorted(c.t, c.t[-1] - self.max_fill_s))
+                k = bisect.bisect_left(c.t, c.t[-1] - self.max_fill_s)
                 del c.t[:k]
                 del c.v[:k]
                 self.counts["samples_expired"] += k
 
     def _skip_empty(self, chans) -> None:
-        """Skip grid that no signal has a sample near: of a jump, only the last ``max_fill_s`` is emitted."""
+        """Skip grid that no signal has a sample near: of a jump, only the last ``max_fill_s`` is emitted.
+
+        Only samples up to the frontier count (they alone are fixed by the frames pushed so far)."""
         t_next = self.t0 + self.next_k / self.fs
-        ahead = [c.t[j] for c in chans if (j := int(np.searchsorted(c.t, t_next - _EPS_S))) < len(c.t)]
-        if ahead and min(ahead) - t_next > self.max_fill_s:
-            k = int(math.floor((min(ahead) - self.max_fill_s - self.t0) * self.fs))
+        ahead = [c.t[j] for c in chans if (j := bisect.bisect_left(c.t, t_next - _EPS_S)) < len(c.t)]
+        first = min(min(ahead, default=math.inf), self._frontier_t)
+        if first - t_next > self.max_fill_s:
+            k = int(math.floor((first - self.max_fill_s - self.t0) * self.fs))
             if k > self.next_k:
                 self.counts["samples_skipped"] += k - self.next_k
                 self.next_k = k
@@ -257,21 +325,11 @@ class GridAligner:
     def pop_ready(self) -> AlignedBlock | None:
         """The grid samples all signals have reached since the last call (at most ``max_fill_s`` of
         them: call until None), or None."""
+        if self.t0 is None or self.k_frontier <= self.next_k:
+            return None
         chans = [self.ch[n] for n in self.names]
-        if any(not c.t for c in chans):
-            self._expire(chans)
-            return None
-        if self.t0 is None:
-            self.t0 = max(c.t[0] for c in chans)
-        lasts = np.array([c.t[-1] for c in chans])
-        # a signal silent for gap_timeout_s while others advance no longer holds the grid back
-        spread = float(lasts.max() - lasts.min())
-        limit = float(lasts.min()) if spread <= self.gap_timeout_s else float(lasts.max()) - self.gap_timeout_s
-        k_end = int(math.floor((limit - self.t0 + _EPS_S) * self.fs)) + 1
-        if k_end <= self.next_k:
-            return None
         self._skip_empty(chans)
-        k_end = min(k_end, self.next_k + self.max_fill)   # at most max_fill per call: call again for more
+        k_end = min(self.k_frontier, self.next_k + self.max_fill)   # at most max_fill per call: call again
         if k_end <= self.next_k:
             return None
         tk = self.t0 + np.arange(self.next_k, k_end) / self.fs
@@ -280,9 +338,7 @@ class GridAligner:
         for i, c in enumerate(chans):
             t = np.asarray(c.t)
             v = np.asarray(c.v)
-            if c.dt is None and t.size >= 3:
-                c.dt = float(np.median(np.diff(t)))
-            bridge = max(self.max_interp_gap_s, 1.5 * (c.dt or 0.0))
+            bridge = max(self.max_interp_gap_s, 1.5 * c.dt)
             j = np.searchsorted(t, tk + _EPS_S, side="right")   # t[j-1] <= tk (+eps) < t[j]
             lo = np.clip(j - 1, 0, t.size - 1)
             hi = np.clip(j, 0, t.size - 1)
@@ -295,7 +351,7 @@ class GridAligner:
             values[i] = np.where(ok, v[lo] + f * (v[hi] - v[lo]), np.nan)
             valid &= ok
             # keep one sample before the next grid time for the next bracket
-            keep_from = max(0, int(np.searchsorted(t, tk[-1] + _EPS_S, side="right")) - 1)
+            keep_from = max(0, bisect.bisect_right(c.t, tk[-1] + _EPS_S) - 1)
             if keep_from > 0:
                 del c.t[:keep_from]
                 del c.v[:keep_from]

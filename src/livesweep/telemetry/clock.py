@@ -11,7 +11,9 @@ frame 116 days ahead would make the aligner fill 116 days of grid.
 * :class:`StampClock`: continuous seconds from one stream's raw stamps. A stamp is *plausible* when
   its step from the stream's last accepted stamp is no more than ``max_reorder_s`` backwards and no
   more than ``slack_s + max_rate * (receive step)`` forwards (``max_rate`` allows replays and
-  simulators running faster than real time). An implausible stamp is held; if the next stamps
+  simulators running faster than real time). A plausible step forward of more than ten typical
+  steps is held for one stamp: the next tells a gap (both released) from an outlier (dropped).
+  An implausible stamp is held; if the next stamps
   fit the old clock it was an outlier and is dropped and counted; if ``confirm`` consecutive
   stamps agree with each other instead, the clock re-anchors (a reboot, an epoch switch) and
   releases them, continuing ``reset_gap_s`` after the last accepted time, so no window spans the
@@ -28,7 +30,7 @@ from __future__ import annotations
 import math
 import time
 
-__all__ = ["ReceiveClock", "StampClock", "UINT64_NS_MAX"]
+__all__ = ["ReceiveClock", "StampClock", "UINT64_NS_MAX", "receive_ns"]
 
 #: The largest time an MCAP record can carry [ns].
 UINT64_NS_MAX = 2**64 - 1
@@ -47,6 +49,15 @@ class ReceiveClock:
     def now_ns(self) -> int:
         """Receive time now [ns since the UNIX epoch, monotonic]."""
         return time.monotonic_ns() + self._offset
+
+
+_RECEIVE_CLOCK = ReceiveClock()
+
+
+def receive_ns() -> int:
+    """Now on the process's one receive clock [ns since the UNIX epoch, monotonic]: the sources stamp
+    frames with it and the monitor stamps its results with it, so both share one time base."""
+    return _RECEIVE_CLOCK.now_ns()
 
 
 class StampClock:
@@ -74,6 +85,15 @@ class StampClock:
         and released together), so a bad first stamp can never become the reference of the
         continuous clock. False: the first stamp anchors at once (enough when only the
         accept/reject decision is used).
+    hold_jumps : bool
+        True: a plausible forward step of more than ten typical steps (at least 50 ms) is held
+        until the next stamp: if that one goes on from it, the stream had a gap and both are
+        released; if not, it was an outlier (dropped, counted) and the clock has not moved. So a
+        single stamp a few seconds ahead can neither shift the clock nor drag the aligner's grid.
+    reanchor : callable, optional
+        ``reanchor(first_new_stamp_s, proposed_offset_s) -> offset_s`` decides the offset of a
+        re-anchoring: the aligner gives every clock of one vehicle that restarts at one reboot the
+        same offset, so signals from different messages stay aligned to the sample.
 
     Attributes
     ----------
@@ -83,7 +103,7 @@ class StampClock:
 
     def __init__(self, scale_s: float, *, wrap_units: int | None = None, max_reorder_s: float = 1.0,
                  slack_s: float = 5.0, max_rate: float = 100.0, confirm: int = 5, reset_gap_s: float = 1.0,
-                 establish: bool = False):
+                 establish: bool = False, hold_jumps: bool = True, reanchor=None):
         self.scale_s = float(scale_s)
         self.wrap_units = wrap_units
         self.max_reorder_s = float(max_reorder_s)
@@ -92,12 +112,16 @@ class StampClock:
         self.confirm = max(int(confirm), 1)
         self.reset_gap_s = float(reset_gap_s)
         self.establish = bool(establish)
+        self.hold_jumps = bool(hold_jumps)
+        self.reanchor = reanchor
         self.offset_s = 0.0
         self._last_raw: float | None = None
         self._last_s = 0.0
         self._last_rx = 0.0
         self.last_t = -math.inf
         self._pending: list[tuple] = []       # held samples: (raw, stamp [s], receive [s], payload)
+        self._jump: tuple | None = None       # a plausible forward jump held for one stamp
+        self._step: float | None = None       # typical forward step [s] (moving average)
         self.wraps = self.resets = self.rejected = 0
 
     @property
@@ -115,10 +139,11 @@ class StampClock:
         -------
         list of (float, object)
             ``(t, payload)`` with ``t`` on the continuous clock [s]: the sample itself when its
-            stamp fits the stream's clock; nothing while it is held (it does not fit, and the
-            stamps after it will tell whether the clock changed); or every held sample and this one
-            when enough consecutive stamps confirm a new clock (a reboot, an epoch switch, the
-            first anchor). Held samples that turn out to be outliers are dropped and counted in
+            stamp fits the stream's clock; nothing while it is held (it jumped forward, or does
+            not fit, and the stamps after it will tell); a held jump and this sample when this one
+            continues from the jump (the stream had a gap); or every held sample and this one when
+            enough consecutive stamps confirm a new clock (a reboot, an epoch switch, the first
+            anchor). Held samples that turn out to be outliers are dropped and counted in
             :attr:`rejected`; so is a stamp that is not a finite number.
         """
         try:
@@ -128,24 +153,50 @@ class StampClock:
         if not math.isfinite(s) or not math.isfinite(receive_s):
             self.rejected += 1
             return []
-        if self._last_raw is None and not self.establish:
-            return [self._accept(raw, s, receive_s, payload)]
-        if self._last_raw is not None:
-            ds = s - self._last_s
-            wrap_s = 0.0
-            w = self.wrap_units
-            if w is not None and ds < 0:
-                zone = (self.slack_s + self.max_rate * max(receive_s - self._last_rx, 0.0)) / self.scale_s
-                if self._last_raw >= w - zone and raw < zone:
-                    wrap_s = w * self.scale_s
-            if self._plausible(ds + wrap_s, receive_s - self._last_rx):
-                self._drop_pending()
-                if wrap_s:
-                    self.offset_s += wrap_s
-                    self.wraps += 1
-                elif ds < 0:
-                    return [(s + self.offset_s, payload)]    # reordered: the anchor stays where it is
+        if self._last_raw is None:
+            if not self.establish:
                 return [self._accept(raw, s, receive_s, payload)]
+            return self._candidate(raw, s, receive_s, payload)
+        out = []
+        if self._jump is not None:                       # the stamp before jumped forward: this one tells
+            jr, js, jrx, jp = self._jump
+            self._jump = None
+            if -self.max_reorder_s <= s - js <= self._jump_s() and self._plausible(s - js, receive_s - jrx):
+                out.append(self._accept(jr, js, jrx, jp))  # it goes on from the jump: the stream had a gap
+            else:
+                self.rejected += 1                         # the jump was an outlier
+        ds = s - self._last_s
+        wrap_s = 0.0
+        w = self.wrap_units
+        if w is not None and ds < 0:
+            zone = (self.slack_s + self.max_rate * max(receive_s - self._last_rx, 0.0)) / self.scale_s
+            if self._last_raw >= w - zone and raw < zone:
+                wrap_s = w * self.scale_s
+        if not self._plausible(ds + wrap_s, receive_s - self._last_rx):
+            return out + self._candidate(raw, s, receive_s, payload)
+        self._drop_pending()
+        if wrap_s:
+            self.offset_s += wrap_s
+            self.wraps += 1
+        elif ds < 0:
+            return out + [(s + self.offset_s, payload)]     # reordered: the anchor stays where it is
+        elif self.hold_jumps and ds > self._jump_s():
+            self._jump = (raw, s, receive_s, payload)        # plausible, but one stamp does not move the clock
+            return out
+        return out + [self._accept(raw, s, receive_s, payload)]
+
+    @property
+    def jump_held(self) -> bool:
+        """True when the last stamp fed jumped forward and is held until the next one tells."""
+        return self._jump is not None
+
+    def _jump_s(self) -> float:
+        """A forward step longer than this is held [s]: ten typical steps, at least 50 ms."""
+        return math.inf if self._step is None else max(10.0 * self._step, 0.05)
+
+    def _candidate(self, raw: float, s: float, receive_s: float, payload) -> list[tuple[float, object]]:
+        """A stamp that does not fit the anchor (or there is none yet): held until ``confirm``
+        consecutive ones agree, then the clock (re-)anchors and releases them."""
         pend = self._pending
         if pend and not self._plausible(s - pend[-1][1], receive_s - pend[-1][2]):
             self._drop_pending()
@@ -157,8 +208,10 @@ class StampClock:
         # re-anchoring (reboot, epoch switch) continues reset_gap_s after the last accepted time,
         # so no window spans the discontinuity and the clock never jumps by the size of the step.
         if self._last_raw is not None:
-            self.offset_s = self.last_t + self.reset_gap_s - pend[0][1]
+            offset = self.last_t + self.reset_gap_s - pend[0][1]
+            self.offset_s = offset if self.reanchor is None else self.reanchor(pend[0][1], offset)
             self.resets += 1
+            self._step = None
         held, self._pending = pend, []
         return [self._accept(r, x, rx, p) for r, x, rx, p in held]
 
@@ -168,6 +221,9 @@ class StampClock:
         self._pending = []
 
     def _accept(self, raw: float, s: float, receive_s: float, payload) -> tuple[float, object]:
+        if self._last_raw is not None and s > self._last_s:
+            step = s - self._last_s
+            self._step = step if self._step is None else 0.9 * self._step + 0.1 * step
         self._last_raw, self._last_s, self._last_rx = raw, s, receive_s
         t = s + self.offset_s
         self.last_t = max(self.last_t, t)
