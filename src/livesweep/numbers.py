@@ -15,10 +15,38 @@ import math
 import numpy as np
 
 __all__ = ["frozen_array", "finite_or_none", "NONFINITE_STRINGS", "nonfinite_text", "nonfinite_value",
-           "float_json_schema"]
+           "float_json_schema", "json_safe"]
 
 #: How a non-finite float is written in a recorded JSON message, and read back.
 NONFINITE_STRINGS = {"NaN": math.nan, "Infinity": math.inf, "-Infinity": -math.inf}
+
+
+def json_safe(obj):
+    """``(copy, n)``: ``obj`` with every non-finite float as ``"NaN"`` / ``"Infinity"`` /
+    ``"-Infinity"``, and how many there were.
+
+    Tuples become lists, numpy arrays and scalars their Python equivalents (nested too); anything
+    else is returned as it is (``json.dumps`` rejects what it cannot encode).
+    """
+    counter = [0]
+
+    def walk(o):
+        if isinstance(o, float):
+            if math.isfinite(o):
+                return o
+            counter[0] += 1
+            return nonfinite_text(o)
+        if isinstance(o, dict):
+            return {k: walk(v) for k, v in o.items()}
+        if isinstance(o, (list, tuple)):
+            return [walk(v) for v in o]
+        if isinstance(o, np.ndarray):
+            return walk(o.tolist())
+        if isinstance(o, np.generic):
+            return walk(o.item())
+        return o
+
+    return walk(obj), counter[0]
 
 
 def float_json_schema(**extra) -> dict:
@@ -49,7 +77,7 @@ def finite_or_none(x, digits: int | None = None) -> float | None:
     """``float(x)`` (rounded to ``digits`` when given), or None when it is not a finite number."""
     try:
         x = float(x)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):      # OverflowError: an integer beyond float range
         return None
     if not math.isfinite(x):
         return None

@@ -70,7 +70,7 @@ from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import CompressionType, Writer
 
 from livesweep.errors import LogFormatError, quote
-from livesweep.numbers import NONFINITE_STRINGS, nonfinite_text
+from livesweep.numbers import NONFINITE_STRINGS, json_safe
 
 __all__ = [
     "WRITER_METADATA_NAME",
@@ -87,6 +87,7 @@ __all__ = [
     "SkippedMessages",
     "SKIP_REASONS",
     "recover",
+    "get_field",
 ]
 
 #: Name of the metadata record the writer adds on close (library and non-finite counts).
@@ -120,29 +121,6 @@ def _check_time_ns(value: Any, what: str, where: str) -> int:
             f"{where}: {what} must be an integer number of nanoseconds in [0, 2**64), got {v}"
         )
     return v
-
-
-def _sanitize(obj: Any, counter: list[int]) -> Any:
-    """Copy of ``obj`` with non-finite floats as ``"NaN"`` / ``"Infinity"`` / ``"-Infinity"``
-    (:mod:`livesweep.numbers`; counted in ``counter[0]``).
-
-    Tuples become lists; numpy arrays and numpy scalars become their Python equivalents. Other
-    types are returned unchanged (``json.dumps`` rejects the ones it cannot encode).
-    """
-    if isinstance(obj, float):
-        if math.isfinite(obj):
-            return obj
-        counter[0] += 1
-        return nonfinite_text(obj)
-    if isinstance(obj, dict):
-        return {k: _sanitize(v, counter) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_sanitize(v, counter) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _sanitize(obj.tolist(), counter)
-    if isinstance(obj, np.generic):
-        return _sanitize(obj.item(), counter)
-    return obj
 
 
 def _open_locked(path: Path, *, exclusive: bool, where: str) -> BinaryIO:
@@ -400,15 +378,14 @@ class McapLogWriter:
             return json.dumps(message, separators=_JSON_SEPARATORS, allow_nan=False).encode("utf-8"), 0
         except (TypeError, ValueError):
             pass  # non-finite floats or numpy types: take the slow path
-        counter = [0]
         try:
-            clean = _sanitize(message, counter)
+            clean, nonfinite = json_safe(message)
             data = json.dumps(clean, separators=_JSON_SEPARATORS, allow_nan=False).encode("utf-8")
         except (TypeError, ValueError, RecursionError) as e:
             raise LogFormatError(
                 f"{self._path}: topic {topic!r}: message cannot be encoded as JSON: {e}"
             ) from e
-        return data, counter[0]
+        return data, nonfinite
 
     def write(
         self,
@@ -1232,7 +1209,7 @@ def read_summary(path: str | os.PathLike[str]) -> LogSummary:
     )
 
 
-def _get_field(data: Any, field: str) -> tuple[bool, Any]:
+def get_field(data: Any, field: str) -> tuple[bool, Any]:
     """Look up ``field`` in a message: an exact key first, else a dotted path
     (``"a.b.0"``: dict keys and list indices). Returns (found, value)."""
     if isinstance(data, dict) and field in data:
@@ -1375,7 +1352,7 @@ def _column(objs: list, field: str, missing: str, where: str, log_times: list[in
     record can be cropped around it.
     """
     if "." in field:
-        col = [v if found else _MISSING for found, v in (_get_field(o, field) for o in objs)]
+        col = [v if found else _MISSING for found, v in (get_field(o, field) for o in objs)]
     else:
         col = [o.get(field, _MISSING) for o in objs]
     if col.count(_MISSING):
