@@ -272,6 +272,18 @@ def test_zenoh_config_defaults_and_files(tmp_path):
     assert json.loads(c.get_json("listen/endpoints")) == ["tcp/127.0.0.1:0"]
     assert json.loads(zenoh_config(config_path=explicit, listen=[9]).get_json("listen/endpoints")) == ["tcp/127.0.0.1:9"]
 
+    # what a file does not set stays as safe as without a file: scouting off unless "enabled" is set
+    for text, on in (('{ mode: "peer" }', False),
+                     ('{ scouting: { multicast: { address: "224.0.0.224:7446" } } } // multicast: { enabled: true }',
+                      False),
+                     ('{ scouting: { multicast: { autoconnect: { router: ["peer"] }, enabled: true } } }', True),
+                     ('{ "scouting": { "gossip": { "enabled": true } } }', False)):
+        f = tmp_path / "scouting.json5"
+        f.write_text(text)
+        c = zenoh_config(config_path=f)
+        assert json.loads(c.get_json("scouting/multicast/enabled")) is on, text
+    assert json.loads(c.get_json("scouting/gossip/enabled")) is True          # the last file sets it
+
     for kw in ({"mode": "satellite"}, {"listen": ["no-slash"]}, {"listen": [70000]}, {"connect": [True]}):
         with pytest.raises(ConfigError):
             zenoh_config(**kw)

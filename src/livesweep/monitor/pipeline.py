@@ -38,6 +38,7 @@ from livesweep.monitor.ingest import FrameQueue, Ingest
 from livesweep.spectral.excitation import Alert, ExcitationMonitor
 from livesweep.spectral.online import OnlineSpectralEstimator
 from livesweep.telemetry.align import GridAligner
+from livesweep.telemetry.clock import receive_ns
 
 __all__ = ["MonitorSettings", "Estimate", "MonitorPipeline", "LINK_ANOMALIES"]
 
@@ -382,7 +383,7 @@ class MonitorPipeline:
             if status.alerts:
                 self.view.log_alerts(t_s, [(a.kind, a.message) for a in status.alerts])
             if self._oldest_unlogged is not None:     # receipt of the oldest frame this estimate includes
-                self.totals.latency_s.append((time.time_ns() - self._oldest_unlogged) * 1e-9)
+                self.totals.latency_s.append((receive_ns() - self._oldest_unlogged) * 1e-9)
                 self._oldest_unlogged = None
         payload = self._payload(est, rows)
         if self.publisher is not None:
@@ -391,13 +392,13 @@ class MonitorPipeline:
             for a in status.alerts:
                 self._record_alert(t_s, a)
             if self.totals.estimates % max(1, self.s.results_every) == 0:
-                self.recorder.record_result("estimate", payload, log_time_ns=time.time_ns())
+                self.recorder.record_result("estimate", payload, log_time_ns=receive_ns())
 
     def _record_alert(self, t_s: float | None, alert: Alert) -> None:
         self.alerts_raised += 1
         if self.recorder is not None:
             self.recorder.record_result("alert", {"t_s": t_s, "kind": alert.kind, "message": alert.message,
-                                                  "value": float(alert.value)}, log_time_ns=time.time_ns())
+                                                  "value": float(alert.value)}, log_time_ns=receive_ns())
 
     # -- link counters ------------------------------------------------------------------------
     def counters(self) -> dict:
@@ -458,7 +459,7 @@ class MonitorPipeline:
                                                  "frames_recorded": self.totals.frames,
                                                  "analysis_shed": self.analysis_shed,
                                                  "sources": c["sources"], "aligner": c["aligner"]},
-                                        log_time_ns=time.time_ns())
+                                        log_time_ns=receive_ns())
             if final:
                 self.recorder.set_counters(c)
 

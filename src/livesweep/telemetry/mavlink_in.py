@@ -52,7 +52,7 @@ calls that callback for signed frames whose check failed; those are always refus
 (``allow_unsigned`` never lets a forged signature through) and counted in ``bad_signature`` only.
 Without a key, signatures are ignored and everything is accepted.
 
-Time: ``receive_ns`` comes from a :class:`~livesweep.telemetry.clock.ReceiveClock` (UNIX time that
+Time: ``receive_ns`` comes from :func:`~livesweep.telemetry.clock.receive_ns` (UNIX time that
 does not step with the wall clock). A ``vehicle_ns`` outside what MCAP can hold, or that does not
 follow its (sysid, compid, time field) stream's recent clock, is replaced by None and counted
 (``clock_unrepresentable``, ``clock_implausible``): the frame is still recorded, with its receive
@@ -93,7 +93,7 @@ from typing import Any
 
 from livesweep.errors import ConfigError, LivesweepError, LogFormatError
 from livesweep.telemetry import mavlink_codec as codec
-from livesweep.telemetry.clock import UINT64_NS_MAX, ReceiveClock, StampClock
+from livesweep.telemetry.clock import UINT64_NS_MAX, StampClock, receive_ns
 from livesweep.telemetry.frames import Frame
 from livesweep.telemetry.mavlink_codec import _dialect, mavutil  # imported with MAVLINK20=1
 from livesweep.telemetry.mavlink_out import parse_url
@@ -287,7 +287,7 @@ class _Decoder:
         clock = self._stamp_clocks.get(key)
         if clock is None:
             clock = self._stamp_clocks[key] = StampClock(1e-9, wrap_units=wrap_ns)
-        if not clock.feed(vns, receive_ns * 1e-9):
+        if not clock.feed(vns, receive_ns * 1e-9) and not clock.jump_held:
             self.counts["clock_implausible"] += 1
             self._warn_once("clock_implausible", f"MAVLink {mtype} from {rec['sysid']}/{rec['compid']}: {field} "
                             f"{raw} does not follow the stream's clock; recorded with its receive time (further ones "
@@ -446,13 +446,13 @@ class MavlinkSource:
         if isinstance(rcvbuf_bytes, bool) or not isinstance(rcvbuf_bytes, int) or rcvbuf_bytes <= 0:
             raise ConfigError(f"rcvbuf_bytes {rcvbuf_bytes!r} must be a positive integer")
         self._dec = _Decoder(key, allow_unsigned, live=True)
-        self._clock = ReceiveClock()
         self._pending: collections.deque[Frame] = collections.deque()
         self._closed = False
         self._clients: dict[socket.socket, Any] = {}  # tcpin: accepted client -> its own parser
         self._eof = False
         self.link_events = 0  # tcp: disconnects seen; tcpin: clients accepted/lost
         self._refused = 0     # tcpin: clients beyond the limit
+        self._proc_drops = 0  # udpin: the kernel's drop count read from /proc/net/udp
         self.rcvbuf_granted: int | None = None
 
         codec.ensure_mavlink2()
@@ -517,6 +517,9 @@ class MavlinkSource:
     @property
     def counts(self) -> dict:
         c = self._dec.snapshot()
+        # the count stamped on datagrams (ingest thread) and the one in /proc (refresh_kernel_drops):
+        # each written by one thread only, the larger is the truth
+        c["kernel_drops"] = max(c["kernel_drops"], self._proc_drops)
         if self._kind == "tcpin":
             c["clients"] = len(self._clients)
             c["clients_refused"] = self._refused
@@ -555,8 +558,7 @@ class MavlinkSource:
                     for line in f:
                         cols = line.split()
                         if len(cols) >= 13 and cols[9] == str(inode):
-                            c = self._dec.counts
-                            c["kernel_drops"] = max(c["kernel_drops"], int(cols[12]))
+                            self._proc_drops = int(cols[12])
                             return
             except (OSError, ValueError, StopIteration):
                 continue
@@ -568,8 +570,7 @@ class MavlinkSource:
                 data, anc, _flags, addr = sock.recvmsg(65535, 64)
                 for level, kind, payload in anc:
                     if level == socket.SOL_SOCKET and kind == _SO_RXQ_OVFL and len(payload) >= 4:
-                        c = self._dec.counts
-                        c["kernel_drops"] = max(c["kernel_drops"], struct.unpack("I", payload[:4])[0])
+                        self._dec.counts["kernel_drops"] = struct.unpack("I", payload[:4])[0]
             else:  # pragma: no cover - not Linux
                 data, addr = sock.recvfrom(65535)
         except (BlockingIOError, InterruptedError):
@@ -582,7 +583,7 @@ class MavlinkSource:
 
     def _parse(self, data: bytes, mav: Any, out: collections.deque) -> None:
         dec = self._dec
-        now = self._clock.now_ns()
+        now = receive_ns()
         dec.counts["bytes"] += len(data)
         for m in mav.parse_buffer(data) or ():
             dec.handle(m, now, out)
@@ -636,8 +637,7 @@ class MavlinkSource:
             got = self._recv_udp()
             if got is None:
                 return False
-            data, addr = got
-            self._conn.clients.add(addr)
+            data, _addr = got          # (pymavlink's set of peers is not kept: a monitor never sends)
             self._parse(data, dec.mav, out)
             if dec.pending_bytes():  # a frame cut at the end of the datagram
                 dec.reset()

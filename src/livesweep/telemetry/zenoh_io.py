@@ -17,7 +17,7 @@ integer with more digits than Python converts) and non-objects are counted, neve
 stamp that is not a finite number, does not fit an MCAP time, or does not follow its key's recent
 clock (:class:`~livesweep.telemetry.clock.StampClock`) leaves the frame without a vehicle time
 (recorded with its receive time) and is counted in ``bad_stamp``. Receive times come from a
-:class:`~livesweep.telemetry.clock.ReceiveClock` (they never step with the wall clock).
+:func:`~livesweep.telemetry.clock.receive_ns` (they never step with the wall clock).
 :class:`ZenohPublisher` puts with ``CongestionControl.BLOCK`` so results are not dropped.
 """
 
@@ -37,8 +37,8 @@ from typing import Any
 import zenoh
 
 from livesweep.errors import ConfigError, LivesweepError
-from livesweep.numbers import nonfinite_text
-from livesweep.telemetry.clock import UINT64_NS_MAX, ReceiveClock, StampClock
+from livesweep.numbers import json_safe
+from livesweep.telemetry.clock import UINT64_NS_MAX, StampClock, receive_ns
 from livesweep.telemetry.frames import Frame
 
 __all__ = ["ZenohPublisher", "ZenohSource", "zenoh_config"]
@@ -99,8 +99,9 @@ def zenoh_config(
         ``zenoh.Config.from_file``. Its settings are kept; ``listen`` / ``connect`` / ``mode``
         given here override it. What the file does not say stays as safe as without a file: a
         file that names no listen endpoints listens on nothing (not on Zenoh's default
-        ``tcp/[::]:0``), and one that does not mention multicast (or gossip) scouting has it
-        off (Zenoh's default is on: the session would announce itself on the network). Missing
+        ``tcp/[::]:0``), and one that does not set ``enabled`` in its ``multicast`` (or ``gossip``)
+        scouting block has it off (Zenoh's default is on: the session would announce itself on
+        the network). Missing
         or invalid files raise :class:`ConfigError` naming the file.
     """
     if mode is not None and mode not in _MODES:
@@ -128,8 +129,8 @@ def zenoh_config(
             _insert(c, "connect/endpoints", connect_eps, where)
         text = _without_comments(path.read_text(errors="replace"))
         for kind in ("multicast", "gossip"):
-            if not re.search(rf"\b{kind}\b", text):
-                log.info("zenoh config %s does not mention %s scouting: it stays off", path, kind)
+            if not _sets_key(text, kind, "enabled"):
+                log.info("zenoh config %s does not set %s scouting's 'enabled': it stays off", path, kind)
                 _insert(c, f"scouting/{kind}/enabled", False, where)
         return c
     c = zenoh.Config()
@@ -156,9 +157,28 @@ def _depth(value: Any) -> int:
     return deepest
 
 
+_STRING_OR_COMMENT = re.compile(r'"(?:\\.|[^"\\])*"|\'(?:\\.|[^\'\\])*\'|//[^\n]*|/\*.*?\*/', re.S)
+
+
 def _without_comments(text: str) -> str:
-    """JSON5 text without ``//`` and ``/* */`` comments (a commented-out key is not a setting)."""
-    return re.sub(r"/\*.*?\*/|//[^\n]*", "", text, flags=re.S)
+    """JSON5 text without ``//`` and ``/* */`` comments (strings, which may hold ``//``, are kept)."""
+    return _STRING_OR_COMMENT.sub(lambda m: m.group(0) if m.group(0)[0] in "\"'" else " ", text)
+
+
+def _sets_key(text: str, block: str, key: str) -> bool:
+    """Whether JSON5 ``text`` sets ``key`` directly inside a ``block: { ... }`` object."""
+    for m in re.finditer(rf"[\"']?\b{block}\b[\"']?\s*:\s*\{{", text):
+        depth, i = 1, m.end()
+        start = i
+        while i < len(text) and depth:
+            depth += {"{": 1, "}": -1}.get(text[i], 0)
+            i += 1
+        flat, prev = text[start:i - 1], None
+        while flat != prev:                           # nested objects removed, innermost first
+            prev, flat = flat, re.sub(r"\{[^{}]*\}", "", flat)
+        if re.search(rf"[\"']?\b{key}\b[\"']?\s*:", flat):
+            return True
+    return False
 
 
 def _as_list(v: Any, what: str) -> list:
@@ -266,7 +286,6 @@ class ZenohSource:
         self._pending: collections.deque[Frame] = collections.deque()
         self._closed = False
         self._warned: set[str] = set()
-        self._clock = ReceiveClock()
         self._stamp_clocks: dict[str, StampClock] = {}
         cfg = _session_config(config, listen_port, connect_port)
         self._session = _open(cfg, f"source {key_expr!r}")
@@ -282,7 +301,7 @@ class ZenohSource:
         if len(q) >= self._max_queue:
             self._dropped += 1
             return
-        now = self._clock.now_ns()
+        now = receive_ns()
         if sample.kind == zenoh.SampleKind.DELETE:
             q.append((now, str(sample.key_expr), None))
         else:
@@ -325,7 +344,7 @@ class ZenohSource:
             clock = self._stamp_clocks.get(key)
             if clock is None:
                 clock = self._stamp_clocks[key] = StampClock(1e-9)
-            if clock.feed(vns, t_ns * 1e-9):
+            if clock.feed(vns, t_ns * 1e-9) or clock.jump_held:
                 return vns
         self._counts["bad_stamp"] += 1
         return None
@@ -419,29 +438,6 @@ class ZenohSource:
         self.close()
 
 
-def _finite(v: Any) -> tuple[Any, int]:
-    """``v`` with non-finite floats as ``"NaN"`` / ``"Infinity"`` / ``"-Infinity"`` (the recording's
-    convention, :mod:`livesweep.numbers`), and how many were replaced."""
-    if isinstance(v, float):
-        return (v, 0) if math.isfinite(v) else (nonfinite_text(v), 1)
-    if isinstance(v, dict):
-        n = 0
-        out = {}
-        for k, x in v.items():
-            out[k], m = _finite(x)
-            n += m
-        return out, n
-    if isinstance(v, (list, tuple)):
-        n = 0
-        out_l = []
-        for x in v:
-            y, m = _finite(x)
-            out_l.append(y)
-            n += m
-        return out_l, n
-    return v, 0
-
-
 class ZenohPublisher:
     """Publish JSON under ``<prefix>/<key>`` with ``CongestionControl.BLOCK`` (nothing dropped).
 
@@ -496,7 +492,7 @@ class ZenohPublisher:
         try:
             text = json.dumps(payload, allow_nan=False, separators=(",", ":"))
         except ValueError:
-            clean, n = _finite(payload)
+            clean, n = json_safe(payload)
             self.non_finite += n
             try:
                 text = json.dumps(clean, allow_nan=False, separators=(",", ":"))
