@@ -371,6 +371,9 @@ def _view(args, settings, name):
 
 
 def _print_monitor_summary(summary: dict, out=sys.stdout) -> None:
+    from livesweep.monitor.pipeline import LINK_ANOMALIES
+
+    anomaly_keys = {key for where, key, _ in LINK_ANOMALIES if where == "source"}
     print(f"monitor: {summary['frames']} frames, {summary['estimates']} estimates over {summary['data_s'] or 0:.1f} s "
           f"of data in {summary['wall_s']:.1f} s", file=out)
     al = summary["aligner"]
@@ -383,8 +386,7 @@ def _print_monitor_summary(summary: dict, out=sys.stdout) -> None:
     for src in counters.get("sources", []):
         received = src.get("received") or {}
         systems = src.get("by_system") or {}
-        bad = {k: v for k, v in src.items() if k not in ("name", "received", "by_system", "bytes", "records", "samples")
-               and v and not isinstance(v, dict)}
+        bad = {k: v for k, v in src.items() if k in anomaly_keys and v}
         gaps = sum((src.get("seq_gaps") or {}).values())
         by_sys = sorted(systems.items(), key=lambda kv: -kv[1])
         sys_text = ", ".join(f"{k}: {v}" for k, v in by_sys[:5]) + (f", ... ({len(by_sys)} systems)" if len(by_sys) > 5
@@ -410,24 +412,31 @@ def _read_signing_key(path: str | None) -> bytes | None:
     if not path:
         return None
     try:
-        key = Path(path).read_bytes()
+        with open(path, "rb") as f:
+            key = f.read(33)               # a key is 32 bytes: more says it is the wrong file
     except OSError as e:
         raise ConfigError(f"--signing-key-file {path!r}: cannot be read ({e.strerror or e})") from None
     if len(key) != 32:
-        raise ConfigError(f"--signing-key-file {path!r}: holds {len(key)} bytes; a MAVLink 2 signing key is 32 bytes "
+        raise ConfigError(f"--signing-key-file {path!r}: holds {'more than 32' if len(key) > 32 else len(key)} bytes; "
+                          "a MAVLink 2 signing key is 32 bytes "
                           "(e.g. the SHA-256 of a passphrase)")
     return key
 
 
 def _stop_on_signals(pipe) -> None:
     """SIGTERM (systemd, docker stop, timeout), SIGHUP (a closed terminal) and SIGINT (Ctrl-C) finish
-    the recording like the end of --duration; a second signal interrupts at once."""
+    the recording like the end of --duration. Further signals do not interrupt the finishing (that
+    could leave the file without its summary); SIGKILL still ends the process at once, losing at
+    most the last second."""
     import signal
 
     def handler(signum, frame):
+        name = signal.Signals(signum).name
         if pipe.stop_requested:
-            raise KeyboardInterrupt
-        print(f"monitor: {signal.Signals(signum).name}: finishing the recording", file=sys.stderr, flush=True)
+            print(f"monitor: {name}: still finishing the recording (a few seconds at most)", file=sys.stderr,
+                  flush=True)
+            return
+        print(f"monitor: {name}: finishing the recording", file=sys.stderr, flush=True)
         pipe.request_stop()
 
     for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
@@ -450,8 +459,8 @@ def cmd_monitor(args) -> int:
             raise ConfigError(f"--record {args.record!r} exists: a recording is never overwritten; choose another "
                               "name or pass --force")
     key = _read_signing_key(args.signing_key_file)
-    sources, publisher = [], None
-    try:
+    sources, publisher, view = [], None, None
+    try:                 # everything that can fail first: the recording (which --force truncates) last
         for url in args.mavlink or []:
             from livesweep.telemetry.mavlink_in import MavlinkSource
 
@@ -463,22 +472,20 @@ def cmd_monitor(args) -> int:
             sources.append(ZenohSource(args.zenoh, config=cfg, listen_port=args.zenoh_listen))
             if args.zenoh_publish:
                 publisher = ZenohPublisher(config=cfg, connect_port=args.zenoh_listen)
+        view = _view(args, settings, "live")
         recorder = McapRecorder(args.record, settings=settings.to_dict(), overwrite=args.force,
                                 metadata={"test_point": {"source": "livesweep monitor"}}) if args.record else None
-        view = _view(args, settings, "live")
     except BaseException:
-        for src in sources:
-            src.close()
+        for part in (*sources, publisher, view):
+            if part is not None:
+                part.close()
         raise
     pipe = MonitorPipeline(settings, sources, recorder=recorder, view=view, publisher=publisher, keep_estimates=False)
     _stop_on_signals(pipe)
     where = [f"mavlink {getattr(s, 'description', s.url)}" for s in sources if hasattr(s, "url")]
     where += [f"zenoh {args.zenoh}"] if args.zenoh else []
     print(f"monitor: listening on {', '.join(where)}; Ctrl-C to stop", flush=True)
-    try:
-        summary = pipe.run(duration_s=args.duration)
-    except KeyboardInterrupt:
-        summary = pipe.summary()
+    summary = pipe.run(duration_s=args.duration)
     _print_monitor_summary(summary)
     if args.record:
         print(f"wrote {args.record}")
