@@ -238,8 +238,9 @@ class ZenohSource:
         non-numeric, unrepresentable or implausible values give ``vehicle_ns=None`` and are
         counted in ``bad_stamp``.
     max_queue : int
-        Samples buffered between polls; beyond that, samples are dropped and counted in
-        ``dropped_queue_full`` (the callback must never block the Zenoh thread).
+        Samples buffered between polls (100 000: seconds of a busy link, about 100 MB at 1 kB a
+        sample); beyond that, samples are dropped and counted in ``dropped_queue_full`` (the
+        callback must never block the Zenoh thread).
 
     Frames: topic ``/zenoh/<sample key>``, ``receive_ns`` = the receive clock in the
     callback, ``data`` = the JSON object. ``counts``: ``received`` {key: frames},
@@ -261,7 +262,7 @@ class ZenohSource:
         connect_port: int | None = None,
         stamp_field: str | None = None,
         stamp_scale_ns_per_unit: float = 1e9,
-        max_queue: int = 1_000_000,
+        max_queue: int = 100_000,
     ) -> None:
         self.key_expr = _check_key_expr(key_expr, "key expression")
         if stamp_field is not None and (not isinstance(stamp_field, str) or not stamp_field):
