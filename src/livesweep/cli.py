@@ -384,7 +384,7 @@ def _print_monitor_summary(summary: dict, out=sys.stdout) -> None:
         print(f"  repairs and gaps: {issues}", file=out)
     counters = summary.get("counters") or {}
     for src in counters.get("sources", []):
-        received = src.get("received") or {}
+        received = src.get("received") or src.get("replayed") or {}
         systems = src.get("by_system") or {}
         bad = {k: v for k, v in src.items() if k in anomaly_keys and v}
         gaps = sum((src.get("seq_gaps") or {}).values())
