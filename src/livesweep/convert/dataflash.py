@@ -6,6 +6,9 @@ Both are the same binary format: ``A3 95 <type>`` then the fields of that type, 
 walk (DFReader stops at the first record whose type has no FMT): see *Damage*. The records of
 each type are then decoded column-wise with numpy and written in file order.
 
+:func:`iter_dataflash` gives the same records, valued the same way, as Python records in file
+order (``livesweep stream`` sends them as MAVLink).
+
 Channels
     ``/dataflash/<NAME>`` per message type (``FMT``, ``PARM``, ``MSG``, ``ATT``, ``SIDD``,
     ``SIDS`` ... every type in the log), schema ``dataflash.<NAME>`` (a JSON Schema of its
@@ -80,7 +83,7 @@ import re
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import NamedTuple
+from typing import Iterator, NamedTuple
 
 import numpy as np
 
@@ -89,7 +92,7 @@ from livesweep.convert.common import (MAX_BOOT_US, MIN_RECORD_FRACTION, UNIX_RAN
 from livesweep.errors import LogFormatError
 from livesweep.numbers import float_json_schema
 
-__all__ = ["convert_dataflash"]
+__all__ = ["DataflashRecord", "convert_dataflash", "iter_dataflash"]
 
 _HEAD = b"\xa3\x95"
 _FMT_TYPE = 0x80
@@ -561,36 +564,44 @@ def _check_coverage(src: Path, idx: _Index, n_bytes: int, partial: bool) -> None
         "readable")
 
 
-def convert_dataflash(src, out, *, gps_time: bool = True, partial: bool = False, **options) -> ConversionResult:
-    """Convert the DataFlash / sdlog2 log ``src`` to the MCAP file ``out`` (see the module docstring).
+class DataflashRecord(NamedTuple):
+    """One record of a DataFlash log, as :func:`convert_dataflash` writes it.
 
-    Parameters
+    Attributes
     ----------
-    src, out : str or Path
-    gps_time : bool
-        Shift ``log_time`` to UNIX time with the log's first GPS time (default); False keeps
-        boot-relative times.
-    partial : bool
-        Convert even when less than ``MIN_RECORD_FRACTION`` of the file's bytes are records
-        that can be converted (the default refuses, so a badly damaged log never passes for a
-        whole one).
-
-    Returns
-    -------
-    ConversionResult
-
-    Raises
-    ------
-    LogFormatError
-        ``src`` missing, empty, not DataFlash or with a corrupt header (naming the file), less
-        than ``MIN_RECORD_FRACTION`` of it converts (without ``partial``; the message gives
-        the fraction and where the corruption starts), or ``out`` cannot be written; nothing is
-        left at ``out`` then.
-    ConfigError
-        An option this converter does not take.
+    time_us : int
+        Its vehicle time [µs since boot] (``TimeUS``; a record without one takes the time of the
+        record before it, as in the MCAP ``publish_time``).
+    name : str
+        The message type (``ATT``, ``RATE``, ``MSG`` ...).
+    values : dict
+        ``{column: value}`` in the declared units with the multipliers applied (the module
+        docstring), exactly the JSON record of the ``/dataflash/<name>`` channel.
     """
-    src, out = Path(src), Path(out)
-    refuse_options(src, "a DataFlash log", options, "gps_time and partial only")
+
+    time_us: int
+    name: str
+    values: dict
+
+
+@dataclass
+class _Log:
+    """A DataFlash file decoded: its types, the type and time of every record in file order, and
+    what was skipped or repaired on the way."""
+
+    types: dict             # type id -> _Type, values planned
+    live: list              # the types that have records
+    tsel: np.ndarray        # per record, in file order: its index in ``live``
+    vt: np.ndarray          # per record, in file order: vehicle time [µs since boot]
+    order_pos: dict         # type id -> the file-order positions of its records
+    fmtu: dict
+    skipped: dict
+    warnings: list
+    bad_time: int
+
+
+def _load(src: Path, partial: bool) -> _Log:
+    """Frame, decode and time every record of ``src`` (LogFormatError as convert_dataflash)."""
     try:
         data = src.read_bytes()
     except OSError as e:
@@ -672,9 +683,91 @@ def convert_dataflash(src, out, *, gps_time: bool = True, partial: bool = False,
     if bad_time:
         warnings.append(f"{bad_time} records with an impossible time stamp (over {MAX_BOOT_US} us since boot) "
                         "take the time of the record before them")
-    offset_ns = _gps_offset_ns(types, order_pos, vt) if gps_time else None
+    return _Log(types, live, type_of[order], vt, order_pos, fmtu, skipped, warnings, bad_time)
+
+
+def iter_dataflash(src, *, names=None, partial: bool = False) -> Iterator[DataflashRecord]:
+    """The records of a DataFlash / sdlog2 log in file order, valued as :func:`convert_dataflash` writes them.
+
+    Parameters
+    ----------
+    src : str or Path
+    names : iterable of str, optional
+        Only these message types (e.g. ``{"ATT", "RATE"}``); default every type.
+    partial : bool
+        As for :func:`convert_dataflash`: read a log even when less than ``MIN_RECORD_FRACTION``
+        of it is records.
+
+    Returns
+    -------
+    iterator of DataflashRecord
+        The file is read and checked before this returns; values are built 65 536 records at a
+        time.
+
+    Raises
+    ------
+    LogFormatError
+        As :func:`convert_dataflash`: ``src`` missing, not DataFlash, a corrupt header, or mostly
+        corruption (without ``partial``), naming the file.
+    """
+    log = _load(Path(src), partial)
+    want = None if names is None else frozenset(names)
+    keep = np.array([want is None or t.name in want for t in log.live], dtype=bool)
+    sel = np.flatnonzero(keep[log.tsel]) if log.live else np.zeros(0, dtype=np.int64)
+    return _records(log, sel)
+
+
+def _records(log: _Log, sel: np.ndarray) -> Iterator[DataflashRecord]:
+    live = log.live
+    keys = [t.columns for t in live]
+    cursor = [0] * len(live)
+    for k0 in range(0, sel.size, _WINDOW):
+        at = sel[k0:k0 + _WINDOW]
+        win = log.tsel[at]
+        pending = {}
+        for ti, cnt in enumerate(np.bincount(win, minlength=len(live)).tolist()):
+            if cnt:
+                pending[ti] = iter(live[ti].rows(cursor[ti], cursor[ti] + cnt))
+                cursor[ti] += cnt
+        for ti, t_us in zip(win.tolist(), log.vt[at].tolist()):
+            yield DataflashRecord(t_us, live[ti].name, dict(zip(keys[ti], next(pending[ti]))))
+
+
+def convert_dataflash(src, out, *, gps_time: bool = True, partial: bool = False, **options) -> ConversionResult:
+    """Convert the DataFlash / sdlog2 log ``src`` to the MCAP file ``out`` (see the module docstring).
+
+    Parameters
+    ----------
+    src, out : str or Path
+    gps_time : bool
+        Shift ``log_time`` to UNIX time with the log's first GPS time (default); False keeps
+        boot-relative times.
+    partial : bool
+        Convert even when less than ``MIN_RECORD_FRACTION`` of the file's bytes are records
+        that can be converted (the default refuses, so a badly damaged log never passes for a
+        whole one).
+
+    Returns
+    -------
+    ConversionResult
+
+    Raises
+    ------
+    LogFormatError
+        ``src`` missing, empty, not DataFlash or with a corrupt header (naming the file), less
+        than ``MIN_RECORD_FRACTION`` of it converts (without ``partial``; the message gives
+        the fraction and where the corruption starts), or ``out`` cannot be written; nothing is
+        left at ``out`` then.
+    ConfigError
+        An option this converter does not take.
+    """
+    src, out = Path(src), Path(out)
+    refuse_options(src, "a DataFlash log", options, "gps_time and partial only")
+    log = _load(src, partial)
+    types, warnings = log.types, log.warnings
+    offset_ns = _gps_offset_ns(types, log.order_pos, log.vt) if gps_time else None
     time_base = "gps" if offset_ns is not None else "boot"
-    pub_ns = vt * 1000
+    pub_ns = log.vt * 1000
     log_ns = pub_ns + (offset_ns or 0)
 
     # ---- write
@@ -693,11 +786,13 @@ def convert_dataflash(src, out, *, gps_time: bool = True, partial: bool = False,
                     "type_id": str(t.tid), "instance_field": t.instance}
             writer.add_channel(topic, f"dataflash.{t.name}", _schema(t), meta)
         writer.add_metadata("dataflash", {"time_base": time_base, "boot_to_unix_ns": str(offset_ns or 0),
-                                          "units_declared": str(bool(fmtu)).lower()})
+                                          "units_declared": str(bool(log.fmtu)).lower()})
+        live = log.live
         keys = [t.columns for t in live]
         topics = [t.topic for t in live]
         write = writer.write
-        tsel = type_of[order]
+        tsel = log.tsel
+        n = tsel.size
         cursor = [0] * len(live)
         for k0 in range(0, n, _WINDOW):            # Python values for a window of records at a time
             k1 = min(n, k0 + _WINDOW)
@@ -710,9 +805,9 @@ def convert_dataflash(src, out, *, gps_time: bool = True, partial: bool = False,
             for ti, lt, pt in zip(win.tolist(), log_ns[k0:k1].tolist(), pub_ns[k0:k1].tolist()):
                 write(topics[ti], dict(zip(keys[ti], next(pending[ti]))), log_time_ns=lt, publish_time_ns=pt)
         w.messages_read = int(n)
-        if bad_time:
-            w.repair("implausible_time", bad_time)
-        for reason, count in skipped.items():
+        if log.bad_time:
+            w.repair("implausible_time", log.bad_time)
+        for reason, count in log.skipped.items():
             w.skip(reason, count)
         for text in warnings:
             w.warn(text)
