@@ -89,7 +89,7 @@ import struct
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 from livesweep.errors import ConfigError, LivesweepError, LogFormatError
 from livesweep.telemetry import mavlink_codec as codec
@@ -807,6 +807,7 @@ class TlogSource:
             self._map: Any = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
             self._n = len(self._map)
             self._check_format()
+            self._iter = self._records()
         except BaseException:
             self._release()
             raise
@@ -875,18 +876,19 @@ class TlogSource:
         c["garbage_bytes"] += self._n - at
         log.warning("tlog %r: last record is cut (%d bytes at offset %d ignored)", str(self.path), self._n - at, at)
 
-    def _decode(self, limit: int) -> None:
-        """Decode records into the pending queue until ``limit`` frames are pending or the end."""
+    def _records(self) -> Iterator[tuple[int, bytes, Any]]:
+        """Each MAVLink frame record from the start: ``(time [µs], frame bytes, decoded message)``.
+
+        The one place that frames the file: it keeps the record alignment through non-MAVLink
+        records, garbage, corrupt lengths (after a frame whose CRC fails it rescans from that
+        frame's second byte) and a cut last record, counting what it skips.
+        """
         d, n = self._map, self._n
         dec = self._dec
         counts = dec.counts
-        pend = self._pending
         unpack = struct.unpack_from
         p = self._pos
-        while len(pend) < limit:
-            if p >= n:
-                self._done = True
-                break
+        while p < n:
             if p + 8 > n:
                 self._truncated(p)
                 p = n
@@ -930,9 +932,47 @@ class TlogSource:
             msg = dec.decode_frame(frame)
             if msg.get_type() == "BAD_DATA" and str(getattr(msg, "reason", "")).startswith("invalid MAVLink CRC"):
                 self._resync_from = i + 1  # the length byte itself may be what is corrupted
-            dec.handle(msg, ts * 1000, pend)
-            p = i + ln
+            p = self._pos = i + ln
+            yield ts, frame, msg
         self._pos = p
+
+    def _decode(self, limit: int) -> None:
+        """Decode records into the pending queue until ``limit`` frames are pending or the end."""
+        handle = self._dec.handle
+        pend = self._pending
+        records = self._iter
+        while len(pend) < limit:
+            rec = next(records, None)
+            if rec is None:
+                self._done = True
+                break
+            ts, _frame, msg = rec
+            handle(msg, ts * 1000, pend)
+
+    def raw_records(self) -> Iterator[tuple[int, bytes, Any]]:
+        """The file's MAVLink frames as recorded, to send them on byte for byte (instead of :meth:`poll`).
+
+        Yields
+        ------
+        time_us : int
+            The record's time stamp [µs since the UNIX epoch] (when the ground station got it).
+        frame : bytes
+            The frame exactly as in the file (MAVLink 1 or 2, signature included).
+        msg : pymavlink message
+            pymavlink's decoding of it: ``BAD_DATA`` for a frame whose CRC fails or that cannot be
+            decoded (and, with ``signing_key``, one whose signature is refused); ``UNKNOWN_<id>``
+            for an id outside the dialect.
+
+        The records and their order are :meth:`poll`'s (the same framing and resynchronisation);
+        :attr:`counts` then holds ``records``, ``bytes`` and what was skipped, not the messages per
+        type (those come from :meth:`poll`'s frames). :meth:`poll` and this share the read position.
+        """
+        while not self._closed:
+            rec = next(self._iter, None)
+            if rec is None:
+                self._done = True
+                return
+            yield rec
 
     # ------------------------------------------------------------------ Source API
     @property
