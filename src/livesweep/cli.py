@@ -347,17 +347,19 @@ def _saturation_limits(items, spectral):
     return limits
 
 
+def _pair(item: str, inputs, outputs) -> tuple[str, str]:
+    """``OUT/IN`` of ``--require``; one line naming the item when it is not a pair of the map."""
+    out, sep, inp = item.partition("/")
+    if not sep or out not in outputs or inp not in inputs:
+        raise ConfigError(f"--require {item!r}: give OUTPUT/INPUT with an output of {list(outputs)} "
+                          f"and an input of {list(inputs)}")
+    return out, inp
+
+
 def _required_pairs(items, spectral):
     if not items:
         return None
-    pairs = []
-    for item in items:
-        out, sep, inp = item.partition("/")
-        if not sep or out not in spectral.outputs or inp not in spectral.inputs:
-            raise ConfigError(f"--require {item!r}: give OUTPUT/INPUT with an output of {list(spectral.outputs)} "
-                              f"and an input of {list(spectral.inputs)}")
-        pairs.append((out, inp))
-    return tuple(pairs)
+    return tuple(_pair(item, spectral.inputs, spectral.outputs) for item in items)
 
 
 def _view(args, settings, name):
@@ -492,14 +494,46 @@ def cmd_monitor(args) -> int:
     return 0
 
 
+def _recorded_settings(log: str):
+    """The monitor settings a recording was made with (its ``livesweep_settings.json``), or None."""
+    import json
+
+    from livesweep.monitor.pipeline import MonitorSettings
+    from livesweep.telemetry.mcap_log import read_attachments
+
+    raw = read_attachments(log).get("livesweep_settings.json")
+    if raw is None:
+        return None
+    try:
+        d = json.loads(raw)
+    except ValueError as e:
+        raise ConfigError(f"{log}: livesweep_settings.json is not JSON ({e}); give --case or --map") from None
+    return MonitorSettings.from_dict(d, where=f"{log}: livesweep_settings.json")
+
+
 def cmd_replay(args) -> int:
-    """Run the monitor pipeline over a recorded MCAP log."""
+    """Run the monitor pipeline over a recorded MCAP log, with the settings it was recorded with
+    unless --case or --map says otherwise."""
+    from dataclasses import replace
+
     from livesweep.monitor.pipeline import MonitorPipeline
     from livesweep.telemetry.replay import McapReplaySource
 
     if not Path(args.log).is_file():
         raise ConfigError(f"log {args.log!r} does not exist")
-    settings = _monitor_settings(args)
+    settings = None
+    if not args.case and not getattr(args, "map", None):
+        settings = _recorded_settings(args.log)
+        if settings is not None:
+            print(f"replay: the settings recorded in {args.log} (give --case or --map to use others)")
+            overrides = {k: v for k, v in (("window_s", args.window), ("update_period_s", args.update_period))
+                         if v is not None}
+            if args.require:
+                overrides["required_pairs"] = tuple(_pair(item, settings.inputs, settings.outputs)
+                                                    for item in args.require)
+            settings = replace(settings, **overrides)
+    if settings is None:
+        settings = _monitor_settings(args)
     pipe = MonitorPipeline(settings, [McapReplaySource(args.log, speed=args.speed or 0.0)],
                            view=_view(args, settings, "replay"))
     _print_monitor_summary(pipe.run())

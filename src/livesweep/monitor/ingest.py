@@ -70,7 +70,7 @@ class FrameQueue:
         """Queued frames, oldest first: whole batches up to about ``max_frames`` (possibly none
         after ``timeout_s`` [s]), so one turn of the analysis loop stays short."""
         with self._cv:
-            if not self._items and not self._closed:
+            if not self._items and not self._closed and timeout_s > 0:
                 self._cv.wait(timeout_s)
             out: list = []
             while self._items and (not out or len(out) + len(self._items[0]) <= max_frames):
@@ -105,17 +105,21 @@ class Ingest(threading.Thread):
     recorder : McapRecorder, optional
     wanted_topics : set of str, optional
         Topics the analysis uses; other frames are recorded but not queued (None: all).
+    also_wanted : callable, optional
+        ``also_wanted(topic) -> bool`` for further topics the analysis uses (test-point evidence).
     drain_timeout_s : float
         On stop, read live sources until they are empty, for at most this long [s].
     """
 
-    def __init__(self, sources, queue: FrameQueue, *, recorder=None, wanted_topics=None,
+    def __init__(self, sources, queue: FrameQueue, *, recorder=None, wanted_topics=None, also_wanted=None,
                  drain_timeout_s: float = 5.0):
         super().__init__(name="livesweep-ingest", daemon=True)
         self.sources = list(sources)
         self.queue = queue
         self.recorder = recorder
         self.wanted = None if wanted_topics is None else frozenset(wanted_topics)
+        self.also_wanted = also_wanted
+        self._verdicts: dict[str, bool] = {}     # topic -> wanted (decided once per topic)
         self.drain_timeout_s = float(drain_timeout_s)
         self.received = 0          # frames read from the sources (all recorded, when recording)
         self.drained = 0           # of which read while draining at stop
@@ -144,8 +148,15 @@ class Ingest(threading.Thread):
             self.recorder.record(frames)
         self.received += len(frames)
         if self.wanted is not None:
-            frames = [f for f in frames if f.topic in self.wanted]
+            frames = [f for f in frames if self._wants(f.topic)]
         self.queue.put(frames)
+
+    def _wants(self, topic: str) -> bool:
+        w = self._verdicts.get(topic)
+        if w is None:
+            w = self._verdicts[topic] = topic in self.wanted or (self.also_wanted is not None
+                                                                   and self.also_wanted(topic))
+        return w
 
     def run(self) -> None:
         timeout = 0.02 if len(self.sources) > 1 else 0.05

@@ -35,6 +35,7 @@ import numpy as np
 
 from livesweep.errors import ConfigError
 from livesweep.monitor.ingest import FrameQueue, Ingest
+from livesweep.monitor.testpoints import SOURCES, TestPointTracker
 from livesweep.spectral.excitation import Alert, ExcitationMonitor
 from livesweep.spectral.online import OnlineSpectralEstimator
 from livesweep.telemetry.align import GridAligner
@@ -102,6 +103,10 @@ class MonitorSettings:
         One exogenous reference per input (a closed-loop test point's logged sweep injection): the
         live responses and coherences are then formed through them (method.md §4.6), free of the
         feedback bias; while a reference is silent the direct estimate is shown.
+    test_points : livesweep.config.TestPointSettings, optional
+        Where test points come from, which input each SystemID axis sweeps and which pairs each
+        swept input must cover (a map's ``[test_points]`` table); None: every source, the
+        on-axis output of the swept input, 10 s at least.
     """
 
     signals: dict
@@ -117,8 +122,11 @@ class MonitorSettings:
     required_pairs: tuple | None = None
     view_period_s: float = 1.0
     references: tuple | None = None
+    test_points: object | None = None
 
     def to_dict(self) -> dict:
+        """Everything a replay needs to run as the live monitor did (the recording's settings attachment)."""
+        tp = self.test_points
         return {
             "signals": {n: asdict(s) for n, s in self.signals.items()},
             "inputs": list(self.inputs), "outputs": list(self.outputs), "band_rad_s": list(self.band_rad_s),
@@ -126,7 +134,35 @@ class MonitorSettings:
             "update_period_s": self.update_period_s,
             "required_pairs": None if self.required_pairs is None else [list(p) for p in self.required_pairs],
             "references": None if not self.references else list(self.references),
+            "saturation_limits": None if not self.saturation_limits else
+            {k: list(v) for k, v in self.saturation_limits.items()},
+            "test_points": None if tp is None else {
+                "sources": list(tp.sources), "axes": {str(k): v for k, v in tp.axes.items()},
+                "required": {k: list(v) for k, v in tp.required.items()}, "min_duration_s": tp.min_duration_s},
         }
+
+    @classmethod
+    def from_dict(cls, d: dict, *, where: str = "settings") -> "MonitorSettings":
+        """The settings :meth:`to_dict` wrote (a recording's ``livesweep_settings.json``); ConfigError
+        naming ``where`` and the key when something is missing or malformed."""
+        from livesweep.config import SignalSpec
+
+        try:
+            signals = {n: SignalSpec(**v) for n, v in d["signals"].items()}
+            tp = d.get("test_points")
+            return cls(
+                signals=signals, inputs=tuple(d["inputs"]), outputs=tuple(d["outputs"]),
+                band_rad_s=tuple(float(b) for b in d["band_rad_s"]), sample_rate_hz=float(d["sample_rate_hz"]),
+                window_s=float(d["window_s"]), segment_s=d.get("segment_s"),
+                update_period_s=float(d.get("update_period_s", 0.2)),
+                required_pairs=None if d.get("required_pairs") is None else tuple(tuple(p) for p in d["required_pairs"]),
+                references=None if not d.get("references") else tuple(d["references"]),
+                saturation_limits=None if not d.get("saturation_limits") else
+                {k: tuple(v) for k, v in d["saturation_limits"].items()},
+                test_points=None if tp is None else _test_point_settings(tp),
+            )
+        except (KeyError, TypeError, ValueError, AttributeError) as e:
+            raise ConfigError(f"{where}: not monitor settings livesweep can use ({type(e).__name__}: {e})") from None
 
 
 @dataclass(frozen=True)
@@ -152,6 +188,30 @@ class _Totals:
     ticks_skipped: int = 0          # estimate ticks skipped over a jump of the data clock
     wall_s: float = 0.0
     latency_s: deque = field(default_factory=lambda: deque(maxlen=10_000))
+
+
+def _test_point_settings(d: dict):
+    """A map's test-point settings from their recorded dict."""
+    from livesweep.config import TestPointSettings
+
+    return TestPointSettings(sources=tuple(d["sources"]), axes={int(k): v for k, v in d["axes"].items()},
+                             required={k: tuple(v) for k, v in d["required"].items()},
+                             min_duration_s=float(d["min_duration_s"]))
+
+
+def _tracker(settings: MonitorSettings, names) -> TestPointTracker:
+    """The test-point tracker a settings object asks for (``--require OUT/IN`` names required pairs)."""
+    tp = settings.test_points
+    required = dict(tp.required) if tp is not None else {}
+    named: dict[str, list] = {}
+    for o, i in settings.required_pairs or ():        # --require replaces the map's pairs of its inputs
+        named.setdefault(i, []).append(o)
+    required.update({i: tuple(dict.fromkeys(v)) for i, v in named.items()})
+    refs = dict(zip(settings.inputs, settings.references)) if settings.references else None
+    return TestPointTracker(names, settings.inputs, settings.outputs, settings.sample_rate_hz, settings.band_rad_s,
+                            sources=tp.sources if tp is not None else SOURCES, axes=tp.axes if tp is not None else None,
+                            required=required, min_duration_s=tp.min_duration_s if tp is not None else 10.0,
+                            references=refs)
 
 
 def _source_name(src) -> str:
@@ -200,6 +260,9 @@ class MonitorPipeline:
         self.excitation = ExcitationMonitor(settings.inputs, settings.outputs, settings.band_rad_s,
                                             settings.sample_rate_hz, saturation_limits=settings.saturation_limits,
                                             required_pairs=settings.required_pairs)
+        self.test_points = _tracker(settings, self.names)
+        self.verdict, self.verdict_reasons = None, ()          # the operator's verdict (test points)
+        self._rx_to_data: tuple[int, float] | None = None       # (receive ns, data s) at the aligner's frontier
         self.keep_estimates = keep_estimates
         if keep_estimates is True:
             self.estimates: list[Estimate] | deque = []
@@ -252,7 +315,8 @@ class MonitorPipeline:
         live = any(getattr(src, "live", False) for src in self.sources)
         queue = FrameQueue(self.queue_limit, shed=live)
         wanted = {spec.topic for spec in self.aligner.specs.values()}
-        ingest = self._ingest = Ingest(self.sources, queue, recorder=self.recorder, wanted_topics=wanted)
+        ingest = self._ingest = Ingest(self.sources, queue, recorder=self.recorder, wanted_topics=wanted,
+                                       also_wanted=self.test_points.wants)
         switch = sys.getswitchinterval()
         sys.setswitchinterval(min(switch, SWITCH_INTERVAL_S))   # the ingest thread gets the GIL promptly
         ingest.start()
@@ -262,7 +326,7 @@ class MonitorPipeline:
             while True:
                 frames = queue.get(timeout_s=0.02)
                 for f in frames:
-                    self.aligner.push(f)
+                    self._take(f)
                 self.totals.analysed += len(frames)
                 self.totals.frames = ingest.received
                 self.analysis_shed = queue.shed
@@ -293,17 +357,101 @@ class MonitorPipeline:
             ingest.join()
             self.totals.frames = ingest.received
             self.analysis_shed = queue.shed
-            self.totals.wall_s = clock() - t_start
             try:
+                while frames := queue.get(timeout_s=0):      # what the analysis had not taken yet
+                    for f in frames:
+                        self._take(f)
+                    self.totals.analysed += len(frames)
+                    pending += len(frames)
                 if pending:
                     self._process(time.monotonic())
+                self._test_point_records(self.test_points.finish(self._t_data))
                 if self.view is not None:
                     self._flush_timeseries(time.monotonic(), force=True)
                 self._report(time.monotonic(), final=True)
             finally:
+                self.totals.wall_s = clock() - t_start
                 self.close()
             ingest.check()
         return self.summary()
+
+    # -- frames and test points ------------------------------------------------------------------
+    def _take(self, f) -> None:
+        """One frame from the queue: to the aligner, and to the test-point tracker when it is evidence."""
+        before = self.aligner.k_frontier
+        self.aligner.push(f)
+        if self.aligner.k_frontier != before:
+            self._rx_to_data = (f.receive_ns, self.aligner.frontier_s)
+        if self.test_points.wants(f.topic):
+            t = self._data_time(f.receive_ns)
+            if t is None:
+                return                       # no data yet: nothing a test point could hold
+            for ev in self.test_points.events_of(f, t, self.aligner.system):
+                self._test_point_records(self.test_points.event(ev))
+                self._update_verdict(ev.t_s)
+
+    def _data_time(self, receive_ns: int) -> float | None:
+        """The data time [s] of a frame without a usable stamp (a STATUSTEXT, a marker): the aligner's
+        frontier when it last moved, plus the receive time since."""
+        if self._rx_to_data is None:
+            return None
+        rx, t = self._rx_to_data
+        return t + (receive_ns - rx) * 1e-9
+
+    def _test_point_records(self, records) -> None:
+        """Show, publish and (when closed) record test points, each followed by the operator's verdict
+        at its own data time (so a replay changes the verdict where the live run did)."""
+        for t_s, rec in records:
+            if rec["state"] == "ignored":
+                continue
+            if self.view is not None and hasattr(self.view, "log_test_point"):
+                self.view.log_test_point(t_s, rec)
+            if rec["state"] == "closed":
+                if self.recorder is not None:
+                    self.recorder.record_result("test_point", rec, log_time_ns=receive_ns())
+                if self.publisher is not None:
+                    self.publisher.publish("test_point", rec)
+            self._update_verdict(t_s, rec)
+
+    def _operator_verdict(self, rec: dict | None = None) -> tuple[str, tuple, dict | None]:
+        """(verdict, reasons, the test point it is about): from the test point record just made, else
+        from the tracker's state; never from the sliding window."""
+        tracker = self.test_points
+        if rec is None:
+            if tracker.current is not None:
+                rec = tracker.current.record("open")
+            elif tracker.closing:
+                rec = tracker.closing[-1].record("open")
+                return "WAIT", (f"test point ended at {tracker.closing[-1].end_s:.1f} s: judging",), rec
+            elif tracker.closed:
+                rec = tracker.closed[-1]
+            else:
+                return "WAIT", ("no test point yet: waiting for a sweep, the autopilot's SystemID or an operator "
+                                "marker",), None
+        who = f"{rec['swept_input'] or 'an input'} swept"
+        if rec["state"] == "open":
+            who += f" since {rec['start_s']:.1f} s ({rec['source']})"
+            if rec["verdict"] == "GO":
+                return "GO", (f"test point running, enough already: {who}", *rec["reasons"]), rec
+            return "WAIT", (f"test point running: {who}", *rec["missing"]), rec
+        return rec["verdict"], (f"last test point ({who} {rec['start_s']:.1f}-{rec['end_s']:.1f} s): "
+                                f"{rec['verdict']}", *rec["reasons"], *rec["missing"]), rec
+
+    def _update_verdict(self, t_s: float, rec: dict | None = None) -> None:
+        verdict, reasons, rec = self._operator_verdict(rec)
+        self.verdict_reasons = reasons
+        if verdict == self.verdict:
+            return
+        payload = {"t_s": round(t_s, 6), "verdict": verdict, "previous": self.verdict, "reasons": list(reasons),
+                   "test_point": None if rec is None else {k: rec[k] for k in ("start_s", "end_s", "source",
+                                                                                "swept_input", "state")}}
+        self.verdict = verdict
+        if self.recorder is not None:
+            self.recorder.record_result("verdict", payload, log_time_ns=receive_ns())
+        if self.publisher is not None:
+            self.publisher.publish("verdict", payload)
+        if self.view is not None:
+            self.view.log_alerts(t_s, [("verdict", f"{verdict}: {reasons[0] if reasons else ''}")])
 
     def _process(self, t_rx: float) -> None:
         """Every block the aligner has ready, through the estimator tick by tick."""
@@ -330,6 +478,9 @@ class MonitorPipeline:
         self._t_data = float(t[-1])
         if self.view is not None:
             self._ts_buffer.append((t, block.values))
+        if self.verdict is None:
+            self._update_verdict(block.t0_s)
+        self._test_point_records(self.test_points.block(block.t0_s, block.values, block.valid))
         if self._next_tick is None:
             self._next_tick = block.t0_s + self.s.update_period_s
             self._t_first = block.t0_s
@@ -379,7 +530,7 @@ class MonitorPipeline:
         if self.view is not None and t_s - self._last_view_t >= self.s.view_period_s - 1e-9:
             self._last_view_t = t_s
             self.view.log_estimate(t_s, frs.omega, list(frs.outputs), list(frs.inputs), frs.coherence, mag, phase,
-                                   rows, status.verdict, list(status.reasons))
+                                   rows, self.verdict or "WAIT", list(self.verdict_reasons))
             if status.alerts:
                 self.view.log_alerts(t_s, [(a.kind, a.message) for a in status.alerts])
             if self._oldest_unlogged is not None:     # receipt of the oldest frame this estimate includes
@@ -471,7 +622,8 @@ class MonitorPipeline:
             "coherence": {f"{o}/{i}": est.coherence[a, b].tolist() for a, o in enumerate(self.s.outputs)
                           for b, i in enumerate(self.s.inputs)},
             "adequacy": [{**r, "band": None if r["band"] is None else list(r["band"])} for r in rows],
-            "verdict": st.verdict, "reasons": list(st.reasons),
+            "verdict": self.verdict or "WAIT", "reasons": list(self.verdict_reasons),
+            "window_verdict": st.verdict,
             "alerts": [{"kind": a.kind, "message": a.message} for a in st.alerts],
         }
 
@@ -510,8 +662,10 @@ class MonitorPipeline:
             "counters": self.counters(),
             "alerts_recorded": self.alerts_raised,
             "recorded": None if self.recorder is None else dict(self.recorder.message_counts),
-            "verdict": None if last is None else last.verdict,
-            "reasons": [] if last is None else list(last.reasons),
+            "verdict": self.verdict,
+            "reasons": list(self.verdict_reasons),
+            "test_points": list(self.test_points.closed),
+            "window_verdict": None if last is None else last.verdict,
             "adequacy": [] if last is None else [
                 {"output": p.output, "input": p.input, "band": p.adequate_band_rad_s, "fraction": p.fraction}
                 for p in last.pairs],

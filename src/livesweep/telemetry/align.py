@@ -322,6 +322,12 @@ class GridAligner:
                 self.counts["samples_skipped"] += k - self.next_k
                 self.next_k = k
 
+    @property
+    def frontier_s(self) -> float | None:
+        """Data time every signal has reached [s] (the last grid time the aligner may emit); None
+        before the grid has started."""
+        return None if self.t0 is None or self.k_frontier == 0 else self._frontier_t
+
     def pop_ready(self) -> AlignedBlock | None:
         """The grid samples all signals have reached since the last call (at most ``max_fill_s`` of
         them: call until None), or None."""

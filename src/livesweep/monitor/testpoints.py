@@ -1,0 +1,469 @@
+"""Test points: where a sweep starts and ends, which input it sweeps, and the verdict over all of it.
+
+The monitor segments the flight into test points from three kinds of evidence, in this order of
+authority (``sources`` in a map's ``[test_points]`` table selects them):
+
+* **autopilot**: ArduPilot's SystemID mode. Over MAVLink its STATUSTEXT "SystemID Starting:
+  axis=N" opens a test point sweeping the input the map's ``axes`` table names for axis N, and
+  "SystemID Finished", or the HEARTBEAT's custom mode leaving SYSTEMID (25), closes it; in a
+  DataFlash log the same texts come as MSG, the start as SIDS (``Ax``) and the mode as MODE.
+  Only the vehicle the aligner analyses counts (a second system's texts are ignored).
+* **marker**: the operator says so: a line typed in the monitor's terminal (``s roll`` / ``e``,
+  recorded as ``/marker/terminal``), a JSON message ``{"action": "start", "input": "roll"}`` on a
+  Zenoh key ending in ``/marker``, a MAVLink STATUSTEXT "livesweep start roll" / "livesweep end", or a
+  NAMED_VALUE_INT "LS_TP" (value k > 0: start sweeping input k, 1-based; 0: end).
+* **sweep**: no one said so, but an input oscillates well above its quiet level (its standard
+  deviation over each second stands ``4x`` above its recent quiet level for 3 seconds and it
+  crosses its mean at least 3 times: a motor spooling up or a trim change is not a sweep); the
+  test point ends after 5 quiet seconds, and one shorter than ``min_duration_s`` (a doublet) is
+  ignored. Used only until an autopilot or marker event is seen.
+
+While a test point is open its aligned samples are kept (up to ``MAX_TEST_POINT_S``) and judged
+every ``JUDGE_EVERY_S`` of data; when it closes it is judged once more
+(:func:`livesweep.spectral.test_point.judge_test_point`: the composite over the whole test point,
+the pairs of the swept input, real excitation against the quiet ``PRE_TEST_S`` before it, not
+counting the tail of an earlier test point). Everything
+depends on the frames and samples alone, so a replay reproduces the test points exactly.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from livesweep.spectral.test_point import TestPointJudgement, judge_test_point
+from livesweep.telemetry.frames import Frame
+
+__all__ = ["TestPointEvent", "TestPoint", "TestPointTracker", "SOURCES", "MARKER_TOPIC",
+           "ARDUPILOT_SYSTEMID_MODE", "JUDGE_EVERY_S", "MAX_TEST_POINT_S", "PRE_TEST_S"]
+
+SOURCES = ("autopilot", "marker", "sweep")
+#: Topic of the operator's terminal markers (recorded, so a replay sees them).
+MARKER_TOPIC = "/marker/terminal"
+#: ArduCopter's flight-mode number of SYSTEMID (custom_mode of HEARTBEAT, Mode of DataFlash MODE).
+ARDUPILOT_SYSTEMID_MODE = 25
+#: An open test point is judged this often [s of data].
+JUDGE_EVERY_S = 5.0
+#: A test point is closed when it reaches this length [s] (bounds memory).
+MAX_TEST_POINT_S = 900.0
+#: Samples before a test point compared with it for the excitation check [s].
+PRE_TEST_S = 20.0
+#: A quiet stretch at least this long is a usable baseline [s]; shorter, the last usable one stands.
+MIN_BASELINE_S = 3.0
+#: Sweep detection confirms a start within this long of it, or gives up (a slow ramp is no sweep) [s].
+_MAX_DETECTION_S = 60.0
+
+_START = re.compile(r"SystemID Starting: axis=(\d+)")
+_FINISHED = re.compile(r"SystemID Finished")
+_MARKER_TEXT = re.compile(r"^\s*(?:livesweep|testpoint)\s*:?\s*(start|end)(?:\s+(\S+))?", re.I)
+_MULTIROTOR_TYPES = {2, 3, 4, 13, 14, 15, 29}      # MAV_TYPE quad, coax, heli, hexa, octo, tri, dodeca
+
+
+@dataclass(frozen=True)
+class TestPointEvent:
+    """A start or an end of a test point, on the data clock.
+
+    Attributes
+    ----------
+    t_s : float
+        Data time [s].
+    action : str
+        ``"start"`` or ``"end"``.
+    source : str
+        ``"autopilot"``, ``"marker"`` or ``"sweep"``.
+    swept_input : str or None
+        The input swept (start only; None when the evidence does not say).
+    note : str
+        What was seen ("SystemID Starting: axis=7", "terminal: s roll", ...).
+    """
+
+    t_s: float
+    action: str
+    source: str
+    swept_input: str | None = None
+    note: str = ""
+
+
+@dataclass
+class TestPoint:
+    """One test point (open while ``end_s`` is None or its samples have not reached it)."""
+
+    start_s: float
+    source: str
+    swept_input: str | None
+    note: str
+    end_s: float | None = None
+    end_note: str = ""
+    t0: list = field(default_factory=list)       # per kept block: start time [s]
+    values: list = field(default_factory=list)   # per kept block: (n_signals, n) samples
+    valid: list = field(default_factory=list)
+    pre: np.ndarray | None = None                # the samples before it (n_signals, n_pre)
+    next_judge_s: float = math.inf               # data time of its next judgement while open
+    judgement: TestPointJudgement | None = None
+
+    def samples(self) -> tuple[np.ndarray, np.ndarray]:
+        """Its samples so far, (values (n_signals, n), valid (n,))."""
+        return np.concatenate(self.values, axis=1), np.concatenate(self.valid)
+
+    def trim(self, fs: float) -> None:
+        """Drop the samples after ``end_s`` (a block that opened it may have run past its end)."""
+        if self.end_s is None:
+            return
+        for k, t0 in enumerate(self.t0):
+            keep = max(int(math.floor((self.end_s - t0) * fs + 1e-6)) + 1, 0)
+            self.values[k], self.valid[k] = self.values[k][:, :keep], self.valid[k][:keep]
+
+    def duration_s(self, fs: float) -> float:
+        return sum(v.shape[1] for v in self.values) / fs
+
+    def record(self, state: str) -> dict:
+        """The ``/livesweep/test_point`` record (DESIGN.md §4.5), also shown while it is open."""
+        j = self.judgement
+        out = {"state": state, "start_s": round(self.start_s, 6),
+               "end_s": None if self.end_s is None else round(self.end_s, 6), "source": self.source,
+               "swept_input": self.swept_input, "note": self.note, "end_note": self.end_note,
+               "verdict": ("NO-GO" if state == "closed" else "WAIT") if j is None else j.verdict,
+               "pairs": [], "missing": [], "reasons": []}
+        if j is None and state == "closed":
+            out["missing"] = ["no samples of the map's signals during the test point"]
+        if j is not None:
+            d = j.to_dict()
+            out.update(pairs=d["pairs"], missing=d["missing"], reasons=d["reasons"],
+                       excited_fraction=d["excited_fraction"], duration_s=d["duration_s"])
+        return out
+
+
+class _SweepDetector:
+    """Per input: is it being swept? (1-s standard deviations against the recent quiet level)."""
+
+    def __init__(self, inputs, fs: float, *, ratio: float = 4.0, start_s: int = 3, quiet_end_s: int = 5,
+                 min_crossings: int = 3, baseline_s: int = 30):
+        self.inputs, self.fs = tuple(inputs), float(fs)
+        self.n_sec = max(int(round(fs)), 1)
+        self.ratio, self.start_s, self.quiet_end_s = ratio, start_s, quiet_end_s
+        self.min_crossings = min_crossings
+        self._buf = {i: [] for i in self.inputs}             # samples of the current second
+        self._t_sec: float | None = None                     # start time of the current second
+        self._quiet = {i: deque(maxlen=baseline_s) for i in self.inputs}   # recent quiet 1-s std's
+        self._run = {i: [] for i in self.inputs}             # (t, std, samples) of the current active run
+        self.active: str | None = None
+        self._quiet_for = 0
+        self._last_active_t = 0.0
+
+    def _baseline(self, i: str) -> float | None:
+        q = self._quiet[i]
+        return float(np.median(q)) if len(q) >= 5 else None
+
+    def feed(self, t: np.ndarray, rows: dict[str, np.ndarray]) -> list[TestPointEvent]:
+        events = []
+        n = t.size
+        k = 0
+        while k < n:
+            if self._t_sec is None:
+                self._t_sec = float(t[k])
+            take = min(self.n_sec - len(self._buf[self.inputs[0]]), n - k)
+            for i in self.inputs:
+                self._buf[i].extend(rows[i][k:k + take].tolist())
+            k += take
+            if len(self._buf[self.inputs[0]]) >= self.n_sec:
+                events += self._second(self._t_sec)
+                self._t_sec = None
+                for i in self.inputs:
+                    self._buf[i] = []
+        return events
+
+    def _second(self, t_sec: float) -> list[TestPointEvent]:
+        events = []
+        stds = {}
+        for i in self.inputs:
+            x = np.asarray(self._buf[i], float)
+            x = x[np.isfinite(x)]
+            stds[i] = float(np.std(x)) if x.size > 1 else 0.0
+        if self.active is None:
+            best, best_ratio = None, 0.0
+            for i in self.inputs:
+                base = self._baseline(i)
+                loud = base is not None and stds[i] > self.ratio * max(base, 1e-12)
+                if loud:
+                    self._run[i].append((t_sec, np.asarray(self._buf[i], float)))
+                    run = self._run[i]
+                    if len(run) > _MAX_DETECTION_S:      # loud for a minute without oscillating: no sweep
+                        run.pop(0)
+                    if len(run) >= self.start_s:
+                        x = np.concatenate([r[1] for r in run])
+                        x = x[np.isfinite(x)]
+                        crossings = int(np.count_nonzero(np.diff(np.signbit(x - x.mean()))))
+                        r = stds[i] / max(base, 1e-12)
+                        if crossings >= self.min_crossings and r > best_ratio:
+                            best, best_ratio = i, r
+                else:
+                    self._run[i] = []
+                    self._quiet[i].append(stds[i])
+            if best is not None:
+                self.active = best
+                self._quiet_for = 0
+                self._last_active_t = t_sec + 1.0
+                events.append(TestPointEvent(self._run[best][0][0], "start", "sweep", best,
+                                             f"{best} oscillates {best_ratio:.0f}x above its quiet level"))
+                for i in self.inputs:
+                    self._run[i] = []
+            return events
+        i = self.active
+        base = self._baseline(i)
+        if base is not None and stds[i] > 2.0 * max(base, 1e-12):
+            self._quiet_for = 0
+            self._last_active_t = t_sec + 1.0
+        else:
+            self._quiet_for += 1
+            if self._quiet_for >= self.quiet_end_s:
+                events.append(TestPointEvent(self._last_active_t, "end", "sweep", i,
+                                             f"{i} quiet for {self.quiet_end_s} s"))
+                self.active = None
+        return events
+
+
+class TestPointTracker:
+    """Opens, judges and closes test points from frames and aligned samples.
+
+    Parameters
+    ----------
+    names : sequence of str
+        The aligned signals, in block row order.
+    inputs, outputs : sequence of str
+    sample_rate_hz : float
+    band_rad_s : (float, float)
+    sources : sequence of str
+        Which evidence opens test points (:data:`SOURCES`).
+    axes : dict of int -> str
+        ArduPilot SystemID axis -> the input it sweeps.
+    required : dict of str -> sequence of str
+        Input -> the outputs whose pairs must be adequate when it is swept (default: the output
+        at the input's list position, else every output).
+    min_duration_s : float
+        Shortest test point that can be GO [s].
+    references : dict of input -> reference, optional
+        The logged injection of an input.
+    """
+
+    def __init__(self, names, inputs, outputs, sample_rate_hz: float, band_rad_s, *, sources=SOURCES,
+                 axes: dict | None = None, required: dict | None = None, min_duration_s: float = 10.0,
+                 references: dict | None = None):
+        self.names, self.inputs, self.outputs = tuple(names), tuple(inputs), tuple(outputs)
+        self.fs, self.band = float(sample_rate_hz), (float(band_rad_s[0]), float(band_rad_s[1]))
+        self.sources = tuple(sources)
+        self.axes = {int(k): v for k, v in (axes or {}).items()}
+        self.required = {i: tuple(v) for i, v in (required or {}).items()}
+        self.min_duration_s = float(min_duration_s)
+        self.references = dict(references or {})     # input -> its logged injection
+        self.current: TestPoint | None = None
+        self.closing: list[TestPoint] = []           # ended, waiting for their last samples
+        self.closed: list[dict] = []                 # records of the closed test points, in order
+        self.explicit = False                        # an autopilot or marker event was seen
+        self._pre = deque()                          # (t0, values, valid) blocks of the recent past
+        self._sweep = _SweepDetector(self.inputs, self.fs) if "sweep" in self.sources else None
+        self._modes: dict = {}                       # (topic, sysid) -> last mode
+        self._last_end: float | None = None          # end of the last test point [s]
+        self._baseline: np.ndarray | None = None     # the last quiet stretch before a test point
+        self.ignored = 0                             # detected activity shorter than a test point
+
+    # -- what it watches ------------------------------------------------------------------------
+    def wants(self, topic: str) -> bool:
+        """Whether frames of ``topic`` can carry a test-point event."""
+        if "autopilot" in self.sources and topic in ("/mavlink/STATUSTEXT", "/mavlink/HEARTBEAT", "/dataflash/MSG",
+                                                     "/dataflash/SIDS", "/dataflash/MODE"):
+            return True
+        return "marker" in self.sources and (topic == MARKER_TOPIC or topic.endswith("/marker")
+                                             or topic in ("/mavlink/STATUSTEXT", "/mavlink/NAMED_VALUE_INT"))
+
+    def required_outputs(self, swept: str) -> tuple:
+        if swept in self.required:
+            return self.required[swept]
+        k = self.inputs.index(swept)
+        return (self.outputs[k],) if k < len(self.outputs) else self.outputs
+
+    # -- frames -> events -----------------------------------------------------------------------
+    def events_of(self, frame: Frame, t_s: float, system) -> list[TestPointEvent]:
+        """The events ``frame`` carries, at data time ``t_s``; ``system`` is the vehicle analysed."""
+        d = frame.data
+        topic = frame.topic
+        sysid = d.get("sysid")
+        if sysid is not None and system is not None and sysid != system:
+            return []
+        out = []
+        auto, marker = "autopilot" in self.sources, "marker" in self.sources
+        if topic in ("/mavlink/STATUSTEXT", "/dataflash/MSG"):
+            text = str(d.get("text", d.get("Message", "")))
+            if auto and (m := _START.search(text)):
+                out.append(TestPointEvent(t_s, "start", "autopilot", self.axes.get(int(m.group(1))), text))
+            elif auto and _FINISHED.search(text):
+                out.append(TestPointEvent(t_s, "end", "autopilot", note=text))
+            elif marker and (m := _MARKER_TEXT.match(text)):
+                out.append(self._marker(t_s, m.group(1), m.group(2), f"text: {text}"))
+        elif topic == "/dataflash/SIDS" and auto:
+            ax = d.get("Ax")
+            if isinstance(ax, (int, float)):
+                out.append(TestPointEvent(t_s, "start", "autopilot", self.axes.get(int(ax)), f"SIDS axis {int(ax)}"))
+        elif topic in ("/mavlink/HEARTBEAT", "/dataflash/MODE") and auto:
+            if topic == "/mavlink/HEARTBEAT":
+                if d.get("autopilot") != 3 or d.get("type") not in _MULTIROTOR_TYPES:
+                    return []
+                mode = d.get("custom_mode")
+            else:
+                mode = d.get("Mode")
+            key = (topic, sysid)
+            before = self._modes.get(key)
+            self._modes[key] = mode
+            if before == ARDUPILOT_SYSTEMID_MODE and mode != ARDUPILOT_SYSTEMID_MODE:
+                out.append(TestPointEvent(t_s, "end", "autopilot", note=f"mode {before} -> {mode}"))
+            elif before is not None and before != ARDUPILOT_SYSTEMID_MODE and mode == ARDUPILOT_SYSTEMID_MODE:
+                out.append(TestPointEvent(t_s, "start", "autopilot", note=f"mode {before} -> {mode} (SYSTEMID)"))
+        elif topic == "/mavlink/NAMED_VALUE_INT" and marker and str(d.get("name", "")).strip() == "LS_TP":
+            v = d.get("value")
+            if isinstance(v, int):
+                swept = self.inputs[v - 1] if 0 < v <= len(self.inputs) else None
+                out.append(self._marker(t_s, "start" if v > 0 else "end", swept, f"NAMED_VALUE_INT LS_TP = {v}"))
+        elif marker and (topic == MARKER_TOPIC or topic.endswith("/marker")):
+            action = str(d.get("action", "")).lower()
+            if action in ("start", "end"):
+                out.append(self._marker(t_s, action, d.get("input"), f"{topic}: {d.get('note', '')}".strip()))
+        return out
+
+    def _marker(self, t_s, action, swept, note) -> TestPointEvent:
+        swept = swept if swept in self.inputs else None
+        return TestPointEvent(t_s, action.lower(), "marker", swept, note)
+
+    # -- the state machine ----------------------------------------------------------------------
+    def event(self, ev: TestPointEvent) -> list[tuple[float, dict]]:
+        """Apply an event; returns ``(data time [s], record)`` of the test points it opened."""
+        if ev.source != "sweep":
+            if not self.explicit and self.current is not None and self.current.source == "sweep" \
+                    and ev.action == "start":
+                self.current = None          # an explicit event supersedes sweep detection from now on
+            self.explicit = True
+        elif self.explicit:
+            return []
+        cur = self.current
+        if ev.action == "end":
+            if cur is not None:
+                cur.end_s, cur.end_note = max(ev.t_s, cur.start_s), ev.note
+                self.closing.append(cur)
+                self.current = None
+            return []
+        if cur is not None:
+            if cur.start_s >= ev.t_s - 2.0:
+                # the same start seen twice (a STATUSTEXT and a mode change, MSG and SIDS): keep the
+                # first, take the input from whichever names it
+                if cur.swept_input is None and ev.swept_input is not None:
+                    cur.swept_input = ev.swept_input
+                return []
+            cur.end_s, cur.end_note = ev.t_s, f"a new test point started ({ev.note})"
+            self.closing.append(cur)
+        return self._open(ev)
+
+    def _open(self, ev: TestPointEvent) -> list[tuple[float, dict]]:
+        tp = TestPoint(ev.t_s, ev.source, ev.swept_input, ev.note)
+        quiet_from = self._last_end if self._last_end is not None else -math.inf
+        before = []
+        for t0, values, valid in self._pre:      # split the recent samples at the start
+            k = int(np.clip(math.ceil((ev.t_s - t0) * self.fs - 1e-6), 0, values.shape[1]))
+            q = 0 if quiet_from <= t0 else min(int(math.ceil((quiet_from - t0) * self.fs - 1e-6)), k)
+            before.append(values[:, q:k])            # the baseline: not the tail of an earlier test point
+            if k < values.shape[1]:
+                tp.t0.append(t0 + k / self.fs)
+                tp.values.append(values[:, k:])
+                tp.valid.append(valid[k:])
+        pre = np.concatenate(before, axis=1)[:, -int(round(PRE_TEST_S * self.fs)):] if before else None
+        if pre is not None and pre.shape[1] >= MIN_BASELINE_S * self.fs:
+            self._baseline = pre
+        tp.pre = self._baseline                  # else the last quiet stretch seen before one
+        tp.next_judge_s = ev.t_s + max(self.min_duration_s, JUDGE_EVERY_S)
+        self.current = tp
+        return [(ev.t_s, tp.record("open"))]
+
+    def block(self, t0: float, values: np.ndarray, valid: np.ndarray) -> list[tuple[float, dict]]:
+        """Take one aligned block (start time [s], (n_signals, n), (n,)); returns ``(data time [s],
+        record)`` of the test points it opened (sweep detection), judged while open, or closed."""
+        out = []
+        n = values.shape[1]
+        t = t0 + np.arange(n) / self.fs
+        self._pre.append((t0, values, valid))    # first: a test point opened by this block splits it
+        keep_from = t0 - PRE_TEST_S - _MAX_DETECTION_S  # by time, so what is kept does not depend on block sizes
+        while self._pre and self._pre[0][0] + self._pre[0][1].shape[1] / self.fs < keep_from:
+            self._pre.popleft()
+        if self._sweep is not None and not self.explicit:
+            rows = {i: values[self.names.index(i)] for i in self.inputs}
+            for ev in self._sweep.feed(t, rows):
+                out += self.event(ev)
+        for tp in [*self.closing, *([self.current] if self.current is not None else [])]:
+            start = int(np.searchsorted(t, tp.start_s - 1e-9))
+            stop = n if tp.end_s is None else int(np.searchsorted(t, tp.end_s + 1e-9))
+            if stop > start and (not tp.t0 or t[start] > tp.t0[-1] + 1e-9):
+                tp.t0.append(float(t[start]))
+                tp.values.append(values[:, start:stop])
+                tp.valid.append(valid[start:stop])
+        for tp in list(self.closing):
+            if t[-1] >= tp.end_s:
+                out += self._close(tp)
+        cur = self.current
+        if cur is not None:
+            # judged at fixed ticks of data time, on the samples up to the tick: what it says, and
+            # when, depends on the data alone (a replay's blocks are longer than a live run's)
+            while cur.next_judge_s <= t[-1] and cur.next_judge_s - cur.start_s < MAX_TEST_POINT_S:
+                self._judge(cur, until_s=cur.next_judge_s)
+                out.append((cur.next_judge_s, cur.record("open")))
+                cur.next_judge_s += JUDGE_EVERY_S
+            if cur.next_judge_s - cur.start_s >= MAX_TEST_POINT_S:
+                cur.end_s, cur.end_note = cur.start_s + MAX_TEST_POINT_S, f"closed at {MAX_TEST_POINT_S:g} s"
+                self.current = None
+                self.closing.append(cur)
+                if t[-1] >= cur.end_s:
+                    out += self._close(cur)
+        return out
+
+    def finish(self, t_end_s: float | None = None) -> list[tuple[float, dict]]:
+        """Close every test point still open or closing (the monitor stops, a replay ends)."""
+        out = []
+        cur = self.current
+        if cur is not None:
+            cur.end_s = t_end_s if t_end_s is not None else cur.start_s + cur.duration_s(self.fs)
+            cur.end_note = "the data ended"
+            self.closing.append(cur)
+            self.current = None
+        for tp in list(self.closing):
+            out += self._close(tp)
+        return out
+
+    def _close(self, tp: TestPoint) -> list[tuple[float, dict]]:
+        self.closing.remove(tp)
+        tp.trim(self.fs)
+        self._last_end = tp.end_s
+        if tp.source == "sweep" and tp.duration_s(self.fs) < self.min_duration_s:
+            self.ignored += 1                     # a doublet or a trim change, not a sweep
+            return [(tp.end_s, {**tp.record("closed"), "state": "ignored"})]
+        self._judge(tp)
+        rec = tp.record("closed")
+        self.closed.append(rec)
+        return [(tp.end_s, rec)]
+
+    def _judge(self, tp: TestPoint, until_s: float | None = None) -> None:
+        if not tp.values:
+            tp.judgement = None
+            return
+        values, valid = tp.samples()
+        if until_s is not None:
+            n = max(int(math.floor((until_s - tp.t0[0]) * self.fs + 1e-6)) + 1, 0)
+            values, valid = values[:, :n], valid[:n]
+        swept = tp.swept_input
+        if swept is None:                      # the evidence did not say: the input that moved most
+            spread = [np.nanstd(values[self.names.index(i)]) for i in self.inputs]
+            pre = [np.nanstd(tp.pre[self.names.index(i)]) if tp.pre is not None and tp.pre.shape[1] > 1 else 0.0
+                   for i in self.inputs]
+            ratios = [s / max(p, 1e-12) if p > 0 else s for s, p in zip(spread, pre)]
+            swept = tp.swept_input = self.inputs[int(np.nanargmax(ratios))]
+        tp.judgement = judge_test_point(values, self.names, self.fs, swept, self.required_outputs(swept), self.band,
+                                        valid=valid, pre_values=tp.pre, references=self.references,
+                                        min_duration_s=self.min_duration_s)
