@@ -221,3 +221,52 @@ def test_arducopter_systemid_opens_and_closes_the_test_point_and_judges_it(sid7)
     # blurred by the comparison window (the 5 s of loiter logged before the chirp: 2 pi / 5 s bins)
     bins = 2 * math.pi / 5.0
     assert f_cut_rad_s - bins <= lo <= f_cut_rad_s + 3 * bins, (gap, f_cut_rad_s)
+
+
+def test_terminal_markers_reach_the_recording_and_open_a_test_point(tmp_path):
+    """The monitor command with --markers: lines typed on its standard input open and close a test
+    point over a simulated sweep streamed over UDP, and are in the recording for a replay."""
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    from livesweep.telemetry.mavlink_out import MavlinkSender
+    from livesweep.telemetry.mcap_log import read_messages
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    out = tmp_path / "markers.mcap"
+    mon = subprocess.Popen([sys.executable, "-m", "livesweep", "monitor", "--mavlink", f"udpin:127.0.0.1:{port}",
+                            "--record", str(out), "--markers", "--require", "p/dr"], stdin=subprocess.PIPE,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert mon.stdout.readline().startswith("monitor: listening")
+    assert "markers" in mon.stdout.readline()
+    res, frames = sim_frames(seed=25, duration_s=60.0, axes=("dr",))
+    tx = MavlinkSender(f"udpout:127.0.0.1:{port}")
+    t_first = frames[0].vehicle_ns * 1e-9
+    started = ended = False
+    t0 = time.monotonic()
+    try:
+        for f in frames:
+            t = f.vehicle_ns * 1e-9
+            while (t - t_first) / 20 > time.monotonic() - t0:      # 20x real time
+                time.sleep(0.002)
+            if not started and t > t_first + 5:
+                mon.stdin.write("s dr\n"), mon.stdin.flush()
+                started = True
+            if not ended and t > t_first + 70:
+                mon.stdin.write("e\n"), mon.stdin.flush()
+                ended = True
+            tx.send_record(f.topic.split("/")[-1], f.data)
+        time.sleep(0.5)
+    finally:
+        tx.close()
+        mon.send_signal(2)
+        stdout, stderr = mon.communicate(timeout=60)
+    assert mon.returncode == 0, stderr
+    marks = [m.data["action"] for m in read_messages(out, topics=testpoints.MARKER_TOPIC)]
+    (tp,) = [m.data for m in read_messages(out, topics="/livesweep/test_point")]
+    assert marks == ["start", "end"] and (tp["source"], tp["swept_input"]) == ("marker", "dr")
+    assert 60 <= tp["end_s"] - tp["start_s"] <= 70 and tp["verdict"] == "GO"

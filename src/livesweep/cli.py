@@ -482,11 +482,19 @@ def cmd_monitor(args) -> int:
             if part is not None:
                 part.close()
         raise
+    if args.markers or (args.markers is None and sys.stdin.isatty()):
+        from livesweep.monitor.markers import HELP, MarkerSource
+
+        sources.append(MarkerSource())
     pipe = MonitorPipeline(settings, sources, recorder=recorder, view=view, publisher=publisher, keep_estimates=False)
     _stop_on_signals(pipe)
     where = [f"mavlink {getattr(s, 'description', s.url)}" for s in sources if hasattr(s, "url")]
     where += [f"zenoh {args.zenoh}"] if args.zenoh else []
     print(f"monitor: listening on {', '.join(where)}; Ctrl-C to stop", flush=True)
+    if any(type(src).__name__ == "MarkerSource" for src in sources):
+        from livesweep.monitor.markers import HELP
+
+        print(f"monitor: {HELP}", flush=True)
     summary = pipe.run(duration_s=args.duration)
     _print_monitor_summary(summary)
     if args.record:
@@ -589,6 +597,8 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--zenoh-publish", action="store_true", help="publish live results under livesweep/...")
     m.add_argument("--record", metavar="FILE.mcap", help="record every message and the live results")
     m.add_argument("--force", action="store_true", help="overwrite an existing --record file")
+    m.add_argument("--markers", action=argparse.BooleanOptionalAction, default=None,
+                   help="read test-point markers typed in the terminal ('s roll', 'e'); default: when it is one")
     m.add_argument("--duration", type=_positive_float, help="stop after this many seconds (default: Ctrl-C)")
     _add_monitor_options(m)
     m.set_defaults(func=cmd_monitor)
