@@ -1,0 +1,265 @@
+"""Numbers as an operator reads them: percentages, bands, durations and markdown cells.
+
+The one rule that matters here: a value judged against a threshold is never printed on the other
+side of it. ``f"{0.5999:.0%}"`` prints ``60%`` next to "NOT adequate (need 60%)"; :func:`percent`
+prints ``59.9 %`` instead.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from livesweep.spectral.adequacy import MIN_COHERENCE
+
+__all__ = ["percent", "band_text", "duration_text", "md_cell", "md_table", "omega_text", "sweep_text",
+           "coherence_kind_text", "adequacy_markdown", "markdown_test_points", "COHERENCE_KINDS",
+           "DEFAULT_REQUIRED_FRACTION"]
+
+#: Fraction of the band a required pair must cover (the monitor's and the test-point judge's default).
+DEFAULT_REQUIRED_FRACTION = 0.6
+
+
+def _finite(x) -> bool:
+    try:
+        return x is not None and math.isfinite(float(x))
+    except (TypeError, ValueError):
+        return False
+
+
+def percent(fraction: float | None, threshold: float | None = None, *, missing: str = "—") -> str:
+    """A fraction as a percentage, never rounded onto the other side of ``threshold``.
+
+    Parameters
+    ----------
+    fraction : float or None
+        The value, 0..1 (not clipped).
+    threshold : float, optional
+        The fraction it is judged against (e.g. 0.6). When the whole-percent rounding would put
+        the shown number on the other side of it (0.5999 -> "60 %" while 0.5999 < 0.6), one
+        decimal is shown, rounded *away* from the threshold (floor below it, ceiling at or above
+        it): 0.5999 -> "59.9 %", 0.6 -> "60 %", 0.6049 with threshold 0.605 -> "60.4 %".
+    missing : str
+        Text for None, NaN or infinity.
+
+    Returns
+    -------
+    str
+        ``"<number> %"`` (a space before the sign, as in the adequacy tables).
+
+    Notes
+    -----
+    A value strictly between 0 and 0.5 % or between 99.5 and 100 % keeps one decimal (rounded
+    away from 0 and 100), so "0 %" and "100 %" mean exactly none and all.
+    """
+    if not _finite(fraction):
+        return missing
+    f = float(fraction)
+    whole = f"{100.0 * f:.0f}"
+    if (whole == "0" and f > 0.0) or (whole == "100" and f < 1.0):   # "0 %"/"100 %" mean none/all
+        tenths = math.ceil(1000.0 * f) if f < 0.5 else math.floor(1000.0 * f)
+        text = f"{tenths / 10.0:.1f}"
+    else:
+        text = whole
+    if threshold is None or not _finite(threshold):
+        return f"{text} %"
+    thr = float(threshold)
+    below = f < thr
+    if (float(text) / 100.0 < thr) == below:
+        return f"{text} %"
+    tenths = math.floor(1000.0 * f) if below else math.ceil(1000.0 * f)
+    if (tenths / 1000.0 < thr) != below:     # 1000 * f rounded onto an integer across the threshold
+        tenths += -1 if below else 1
+    return f"{tenths / 10.0:.1f} %"
+
+
+def band_text(band, *, digits: int = 3, missing: str = "—") -> str:
+    """``(lo, hi)`` [rad/s] as ``"0.3 – 18.9"``; several bands comma-separated; None or empty as ``missing``."""
+    if band is None:
+        return missing
+    if isinstance(band, str):
+        return band or missing
+    b = list(band)
+    if not b:
+        return missing
+    if len(b) == 2 and all(_finite(x) for x in b):
+        return f"{float(b[0]):.{digits}g} – {float(b[1]):.{digits}g}"
+    parts = [band_text(x, digits=digits, missing="") for x in b]
+    return ", ".join(p for p in parts if p) or missing
+
+
+def duration_text(seconds: float | None, *, missing: str = "unknown") -> str:
+    """A duration as an operator says it: ``"45 s"``, ``"2 min 05 s"``, ``"1 h 03 min"``."""
+    if not _finite(seconds):
+        return missing
+    s = max(0.0, float(seconds))
+    if s < 90.0:
+        return f"{s:.0f} s"
+    m = int(round(s)) // 60
+    if m < 60:
+        return f"{m} min {int(round(s)) % 60:02d} s"
+    return f"{m // 60} h {m % 60:02d} min"
+
+
+def md_cell(s) -> str:
+    """Text safe in one markdown table cell (pipes escaped, line breaks flattened)."""
+    return str(s).replace("\\", "\\\\").replace("|", "\\|").replace("\r", " ").replace("\n", " ")
+
+
+def md_table(header: Sequence[str], rows: Sequence[Sequence]) -> list[str]:
+    """Markdown table lines (every cell through :func:`md_cell`)."""
+    out = ["| " + " | ".join(md_cell(h) for h in header) + " |", "|" + "---|" * len(header)]
+    out += ["| " + " | ".join(md_cell(c) for c in r) + " |" for r in rows]
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# What the view writes as text
+# --------------------------------------------------------------------------------------------
+
+#: How each coherence kind is named to the operator.
+COHERENCE_KINDS = {"ordinary": "ordinary γ² (single input)", "partial": "partial γ² (MISO-conditioned)"}
+
+
+def coherence_kind_text(kind: str) -> str:
+    """``"ordinary γ² (single input)"`` or ``"partial γ² (MISO-conditioned)"``; ValueError otherwise."""
+    try:
+        return COHERENCE_KINDS[kind]
+    except KeyError:
+        raise ValueError(f"coherence_kind must be 'ordinary' or 'partial', got {kind!r}") from None
+
+
+def omega_text(omega_rad_s: float) -> str:
+    """A frequency [rad/s] with two significant digits below 10 and none after the point above."""
+    w = float(omega_rad_s)
+    return f"{w:.0f}" if abs(w) >= 9.95 else f"{w:.2g}"
+
+
+def sweep_text(name: str, omega_rad_s: float | None, time_remaining_s: float | None) -> str:
+    """One input's sweep as a status line.
+
+    ``"da: sweeping 3.2 rad/s, 45 s to the band top"``; ``"da: not sweeping"`` when the frequency
+    is unknown (a quiet input); ``"..., band top reached"`` when no time remains; ``"..., time to the
+    band top unknown"`` when the monitor cannot tell (the frequency is not rising).
+    """
+    if not _finite(omega_rad_s):
+        return f"{name}: not sweeping"
+    head = f"{name}: sweeping {omega_text(omega_rad_s)} rad/s"
+    if not _finite(time_remaining_s):
+        return head + ", time to the band top unknown"
+    if float(time_remaining_s) <= 0.0:
+        return head + ", band top reached"
+    return f"{head}, {duration_text(time_remaining_s)} to the band top"
+
+
+def _row_verdict(fraction, band, required: float) -> str:
+    if _finite(fraction) and float(fraction) >= required:
+        return "adequate"
+    return "partly adequate" if band_text(band) != "—" else "not adequate"
+
+
+def adequacy_markdown(t_s: float, rows: Sequence[dict], verdict: str, reasons: Sequence[str], *,
+                      coherence_kind: str = "ordinary", sweep: dict | None = None,
+                      required_fraction: float = DEFAULT_REQUIRED_FRACTION) -> str:
+    """The status document: verdict, coherence kind, sweep per input, reasons and the adequacy table.
+
+    Parameters
+    ----------
+    t_s : float
+        Flight time of the estimate [s].
+    rows : sequence of dict
+        ``{"output", "input", "band": (lo, hi) [rad/s] or None, "fraction": 0..1, ["verdict"]}``.
+        A row's verdict is ``row["verdict"]`` when given, else "adequate" at or above
+        ``required_fraction``, "partly adequate" below it with an adequate band, "not adequate"
+        without one.
+    verdict : str
+        The overall verdict (``GO``/``NO-GO``/``WAIT``).
+    reasons : sequence of str
+    coherence_kind : str
+        ``"ordinary"`` or ``"partial"``: which coherence the verdict judged.
+    sweep : dict, optional
+        ``{input: (omega [rad/s] or None, time remaining [s] or None)}``.
+    required_fraction : float
+        Threshold of the row verdicts; fractions are printed with :func:`percent` against it.
+    """
+    lines = [f"**Verdict: {md_cell(verdict)}**  (flight time {float(t_s):.1f} s)", "",
+             f"Coherence judged: **{coherence_kind_text(coherence_kind)}**, threshold γ² ≥ {MIN_COHERENCE:g}", ""]
+    if sweep:
+        lines += [f"- {md_cell(sweep_text(name, *v))}" for name, v in sweep.items()] + [""]
+    lines += [f"- {md_cell(r)}" for r in reasons]
+    if reasons:
+        lines.append("")
+    table = []
+    for r in rows:
+        band, frac = r.get("band"), r.get("fraction")
+        v = r.get("verdict") or _row_verdict(frac, band, required_fraction)
+        table.append([f"{r.get('output', '?')}/{r.get('input', '?')}", band_text(band),
+                      percent(frac, required_fraction), v])
+    lines += md_table(["pair", "adequate band [rad/s]", "fraction", "verdict"], table)
+    return "\n".join(lines) + "\n"
+
+
+def markdown_test_points(entries: Sequence[tuple[int, dict]], t_s: float) -> str:
+    """The test-point history: the open test point first, then the others, newest first.
+
+    Parameters
+    ----------
+    entries : sequence of (number, test-point dict)
+        In the order to show. A test-point dict is the monitor's ``/livesweep/test_point`` record:
+        ``{"state": "open"|"closed"|..., "start_s", "end_s" (None while open), "source",
+        "swept_input", "verdict", "pairs": [{"output", "input", "adequate_fraction",
+        "band_rad_s": [lo, hi] or None, "coherence": "ordinary"|"partial"}], "missing": [str, ...]}``
+        (optionally ``"required_fraction"``, default 0.6).
+    t_s : float
+        Flight time now [s] (the open test point's elapsed time).
+    """
+    if not entries:
+        return "*No test point yet.*\n"
+    out: list[str] = []
+    for number, tp in entries:
+        out += _tp_section(number, tp, t_s) + [""]
+    return "\n".join(out)
+
+
+def _num(x) -> float | None:
+    return float(x) if _finite(x) else None
+
+
+def _tp_section(number: int, tp: dict, t_s: float) -> list[str]:
+    """One test point: a header line, the pair table, then what is still missing (full sentences
+    under the table: Rerun's markdown tables do not wrap a long cell, they cut it off)."""
+    state = str(tp.get("state") or "?")
+    start, end = _num(tp.get("start_s")), _num(tp.get("end_s"))
+    swept = tp.get("swept_input") or "input not known"
+    if start is None:
+        when = "start unknown"
+    elif end is None:
+        when = f"from {start:.1f} s, {duration_text(float(t_s) - start)} so far"
+    else:
+        when = f"{start:.1f} – {end:.1f} s ({duration_text(end - start)})"
+    head = (f"**Test point {number} ({md_cell(state)}): {md_cell(tp.get('verdict') or '?')}**, sweeping "
+            f"{md_cell(swept)}, {when}, found by {md_cell(tp.get('source') or '?')}")
+    required = _num(tp.get("required_fraction"))
+    required = DEFAULT_REQUIRED_FRACTION if required is None else required
+    missing = [str(m) for m in (tp.get("missing") or [])]
+    rows, kinds = [], []
+    for p in tp.get("pairs") or []:
+        label = f"{p.get('output', '?')}/{p.get('input', '?')}"
+        frac = p.get("adequate_fraction")
+        verdict = "adequate" if _finite(frac) and float(frac) >= required else "NOT adequate"
+        n = sum(1 for m in missing if m.startswith(label + " ") or m.startswith(label + ":"))
+        kinds.append(str(p.get("coherence") or "ordinary"))
+        rows.append([label, band_text(p.get("band_rad_s")), percent(frac, required), verdict,
+                     f"{n} item(s) below" if n else "—"])
+    if kinds:
+        kind = kinds[0] if len(set(kinds)) == 1 else None
+        head += f"; coherence judged: {kind} γ²" if kind else ""
+        if kind is None:     # pairs judged on different kinds: say so per pair
+            for r, k in zip(rows, kinds):
+                r[0] = f"{r[0]} ({k} γ²)"
+    lines = [head, ""]
+    if rows:
+        lines += md_table(["pair", "adequate band [rad/s]", "fraction", "verdict", "still missing"], rows)
+    if missing:
+        lines += ["", "Still missing:"] + [f"- {md_cell(m)}" for m in missing]
+    return lines
