@@ -279,6 +279,13 @@ class MavlinkSender:
                 raise ConfigError(f"MAVLink {msgname}: sysid {sysid!r} / compid {compid!r} not integers in [0, 255]")
         return int(sysid), int(compid)
 
+    def send_frame(self, frame: bytes, msgname: str) -> None:
+        """Send one MAVLink frame that is already encoded (a tlog's record), as it is, with this
+        sender's retries on a full send buffer and its counters (``sent_counts[msgname]``)."""
+        if self._closed:
+            raise LivesweepError(f"MAVLink output {self.url!r} is closed")
+        self._emit(bytes(frame), msgname)
+
     def send_heartbeat(self) -> None:
         """Send a HEARTBEAT (MAV_TYPE_FIXED_WING, MAV_AUTOPILOT_GENERIC, MAV_STATE_ACTIVE)."""
         if self._closed:

@@ -500,9 +500,7 @@ class _RawFrames:
         return self._sender.send_errors
 
     def send_record(self, msgname: str, frame: bytes) -> None:
-        # MavlinkSender's writer, with its retries on a full send buffer and its counters; it
-        # has no public call for a frame that is already encoded
-        self._sender._emit(frame, msgname)
+        self._sender.send_frame(frame, msgname)
 
     def send_heartbeat(self) -> None:  # pragma: no cover - stream_records is called without heartbeats
         raise AssertionError("a tlog carries its own heartbeats")
