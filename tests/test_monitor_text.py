@@ -105,5 +105,5 @@ def test_test_points_markdown_mixed_kinds_and_empty():
     assert md.startswith("**Test point 4 (closed): NO-GO**, sweeping da, 10.0 – 250.0 s (4 min 00 s), "
                          "found by autopilot\n")
     assert "| p/da (partial γ²) | 0.3 – 20 | 61 % | adequate | — |" in md
-    assert "| r/da (ordinary γ²) | — | 20 % | NOT adequate | 1 item(s) below |" in md
+    assert "| r/da (ordinary γ²) | — | 20 % | NOT adequate | 1 below |" in md
     assert "- r/da needs 0.3-20 rad/s: coherence below 0.6 there" in md

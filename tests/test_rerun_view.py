@@ -20,10 +20,12 @@ import rerun.blueprint as rrb
 from rerun.chunk import RrdReader
 
 from livesweep.monitor.blueprint import (
-    ADEQUACY_PATH, ALERTS_PATH, FRACTION_PATH, coherence_path, default_blueprint, magnitude_path, pair_path,
-    phase_path, telemetry_path, waterfall_path,
+    ADEQUACY_PATH, ALERTS_PATH, FRACTION_PATH, TEST_POINTS_PATH, coherence_path, default_blueprint,
+    magnitude_path, pair_path, phase_path, plot_box, plot_margins, sweep_frequency_path, telemetry_path, time_remaining_path,
+    waterfall_path,
 )
 from livesweep.monitor.rerun_view import RerunView, _tensor_array, find_rerun_cli
+from livesweep.monitor.text import percent
 
 INPUTS = ["de", "da"]
 OUTPUTS = ["q", "p", "r"]
@@ -31,6 +33,25 @@ FS = 500.0
 N_SAMPLES = 5000
 BLOCK = 700          # 5000 = 7 blocks of 700 + 1 of 100: block edges are not round numbers
 T_EST = (4.0, 8.0)
+UNITS = {"de": "deg", "da": "deg", "q": "deg/s", "p": "deg/s", "r": None}
+KINDS = ("ordinary", "partial")                       # coherence kind of each estimate
+SWEEPS = (None, {"de": (3.2, 45.0), "da": (None, None)})
+TEST_POINTS = [      # (t_s, record): tp 1 opens, is judged, closes; tp 2 opens
+    (2.0, {"state": "open", "start_s": 1.5, "end_s": None, "source": "marker", "swept_input": "de",
+           "verdict": "WAIT", "pairs": [], "missing": []}),
+    (4.5, {"state": "open", "start_s": 1.5, "end_s": None, "source": "marker", "swept_input": "de",
+           "verdict": "NO-GO",
+           "pairs": [{"output": "q", "input": "de", "adequate_fraction": 0.5999, "band_rad_s": [0.8, 20.0],
+                      "coherence": "ordinary"}],
+           "missing": ["q/de needs 0.3-0.8 rad/s: about 2 more minute(s) of sweep at low frequency"]}),
+    (6.0, {"state": "closed", "start_s": 1.5, "end_s": 6.0, "source": "marker", "swept_input": "de",
+           "verdict": "GO",
+           "pairs": [{"output": "q", "input": "de", "adequate_fraction": 0.75, "band_rad_s": [0.4, 20.0],
+                      "coherence": "partial"}],
+           "missing": []}),
+    (7.0, {"state": "open", "start_s": 7.0, "end_s": None, "source": "sweep", "swept_input": "da",
+           "verdict": "WAIT", "pairs": [], "missing": ["da needs a sweep over 0.3-20 rad/s"]}),
+]
 
 
 def _ns(t):
@@ -66,18 +87,29 @@ def recorded(tmp_path_factory):
     view = RerunView(INPUTS, OUTPUTS, recording_id="test-run", save_path=path, waterfall_rows=5)
     t, names, values, kinds = _known_signals()
     for a in range(0, N_SAMPLES, BLOCK):
-        view.log_timeseries(t[a:a + BLOCK], names, values[:, a:a + BLOCK], kinds)
+        # the first block without units (the bare names), the others with them
+        units = None if a == 0 else [UNITS[n] for n in names]
+        view.log_timeseries(t[a:a + BLOCK], names, values[:, a:a + BLOCK], kinds, units=units)
     estimates = []
+    tps = list(TEST_POINTS)
     for n, te in enumerate(T_EST):
+        while tps and tps[0][0] <= te:
+            view.log_test_point(*tps.pop(0))
         coh, mag, pha = _known_estimate(n, omega)
         if n == 1:
             mag[1, 0, 10:13] = np.nan          # a gap in one Bode curve: drawn as two strips
         rows = [{"output": o, "input": i, "band": (1.0 + n, 10.0 + n) if (o, i) != ("r", "da") else None,
                  "fraction": 0.25 * (io + 1) / 3 + 0.1 * n}
                 for io, o in enumerate(OUTPUTS) for i in INPUTS]
+        rows[0]["fraction"] = 0.5999            # rounds to 60 %: must not be printed as 60 %
+        kw = {"coherence_kind": KINDS[n]} if n else {}      # the first call: the defaults
+        if SWEEPS[n] is not None:
+            kw["sweep"] = SWEEPS[n]
         view.log_estimate(te, omega, OUTPUTS, INPUTS, coh, mag, pha, rows,
-                          verdict=["continue sweep", "adequate"][n], reasons=[f"reason {n} | piped"])
+                          verdict=["continue sweep", "adequate"][n], reasons=[f"reason {n} | piped"], **kw)
         estimates.append((coh, mag, pha, rows))
+    for tp in tps:
+        view.log_test_point(*tp)
     view.log_alerts(8.5, [("coverage", "no energy below 0.8 rad/s"), ("saturation", "de at 98 %")])
     view.close()
     view.close()   # idempotent
@@ -127,52 +159,163 @@ def test_timeseries_values_and_times_exact(recorded):
         np.testing.assert_array_equal([r[0] for r in rows], _ns(t))
         assert all(len(r[1]) == 1 for r in rows)
         np.testing.assert_array_equal([r[1][0] for r in rows], v)      # exact float64
+        # the legend name carries the unit once one is given (static: the last one logged holds)
         static = _rows(recorded["chunks"], telemetry_path(kind, name), "SeriesLines:names")
-        assert static == [(None, [name])]
+        assert static[-1] == (None, [f"{name} [{UNITS[name]}]" if UNITS[name] else name])
 
 
-def test_coherence_bar_chart_values_abscissa_widths(recorded):
+def _grey(rgba):
+    r, g, b = (rgba >> 24) & 255, (rgba >> 16) & 255, (rgba >> 8) & 255
+    return r == g == b
+
+
+def _curve(chunks, path, t_ns):
+    """(strips as float32 arrays, their colors) logged at ``path`` at ``t_ns``."""
+    strips = [np.asarray(s, np.float32).reshape(-1, 2) for s in _at(_rows(chunks, path, "LineStrips2D:strips"), t_ns)]
+    colors = _at(_rows(chunks, path, "LineStrips2D:colors"), t_ns)
+    assert len(colors) == len(strips)
+    return strips, colors
+
+
+def _points(strips, colors, grey):
+    pts = [s for s, c in zip(strips, colors) if _grey(c) == grey]
+    return {tuple(p) for s in pts for p in s}
+
+
+def _check_masked_curve(chunks, path, t_ns, x, y, coh):
+    """Coherent points in colour, in order; every masked point within the coherent range grey; nothing else."""
+    strips, colors = _curve(chunks, path, t_ns)
+    ok = np.isfinite(y) & (coh >= 0.6)
+    xy = np.column_stack([x, y]).astype(np.float32)
+    coloured = [s for s, c in zip(strips, colors) if not _grey(c)]
+    got = np.concatenate(coloured) if coloured else np.zeros((0, 2), np.float32)
+    np.testing.assert_array_equal(got, xy[ok])                      # exactly the coherent points
+    masked = np.isfinite(y) & ~ok
+    lo, hi = (y[ok].min(), y[ok].max()) if ok.sum() >= 2 else (np.nanmin(y), np.nanmax(y))
+    surely_drawn = masked & (y >= lo) & (y <= hi)
+    grey_pts = _points(strips, colors, grey=True)
+    assert {tuple(p) for p in xy[surely_drawn]} <= grey_pts
+    # a grey strip holds masked points plus at most the coherent neighbours it joins
+    assert grey_pts <= {tuple(p) for p in xy[np.isfinite(y)]}
+    assert np.isfinite(np.concatenate(strips)).all()                 # a gap splits, never bridges
+    return strips
+
+
+def _reference(phase, coh):
+    """Expected display phase for a curve without wraps: shifted by whole turns so the value at the
+    lowest coherent frequency lies in (-180, 180]."""
+    ok = np.flatnonzero(coh >= 0.6)
+    j = ok[0] if ok.size else 0
+    return phase - 360.0 * np.ceil((phase[j] - 180.0) / 360.0)
+
+
+def test_coherence_points_values_kind_and_threshold(recorded):
     omega = recorded["omega"]
-    for io, o in enumerate(OUTPUTS):
-        for ii, i in enumerate(INPUTS):
-            rows = _rows(recorded["chunks"], coherence_path(o, i), "BarChart:values")
-            assert [r[0] for r in rows] == list(_ns(T_EST))
-            for (coh, _, _, _), te in zip(recorded["estimates"], T_EST):
-                (tensor,) = _at(rows, _ns(te))
-                assert tensor["shape"] == [omega.size]
-                np.testing.assert_array_equal(tensor["buffer"], coh[io, ii])   # exact float64
-            # the abscissa is logged when the grid is new and holds (latest-at) for later estimates
-            absc = _rows(recorded["chunks"], coherence_path(o, i), "BarChart:abscissa")
-            (a,) = _latest_at(absc, _ns(T_EST[-1]))
-            np.testing.assert_array_equal(a["buffer"], omega)
-            widths = np.array(_latest_at(_rows(recorded["chunks"], coherence_path(o, i), "BarChart:widths"),
-                                         _ns(T_EST[-1])))
-            assert widths.shape == omega.shape and np.all(widths > 0)
-            # neighbouring bars do not overlap on the log-spaced grid (Rerun's default width is 1 rad/s)
-            assert np.all((widths[:-1] + widths[1:]) / 2 <= np.diff(omega) * (1 + 1e-6))
+    x = np.log10(omega)
+    for n, te in enumerate(T_EST):
+        coh = recorded["estimates"][n][0]
+        for io, o in enumerate(OUTPUTS):
+            for ii, i in enumerate(INPUTS):
+                path = coherence_path(o, i)
+                c = coh[io, ii]
+                np.testing.assert_array_equal(_at(_rows(recorded["chunks"], path, "Coherence:values"), _ns(te)), c)
+                assert _at(_rows(recorded["chunks"], path, "Coherence:kind"), _ns(te)) == [KINDS[n]]
+                _check_masked_curve(recorded["chunks"], path, _ns(te), x, c, c)
+                pos = np.asarray(_at(_rows(recorded["chunks"], path, "Points2D:positions"), _ns(te)), np.float32)
+                np.testing.assert_array_equal(pos, np.column_stack([x, c]).astype(np.float32))
+                pcol = _at(_rows(recorded["chunks"], path, "Points2D:colors"), _ns(te))
+                np.testing.assert_array_equal([_grey(v) for v in pcol], c < 0.6)      # grey below 0.6
+    # the threshold is a line at 0.6 across the plotted frequencies, and the axis names the kind
+    thr = _latest_at(_rows(recorded["chunks"], coherence_path("q", "de") + "/threshold", "LineStrips2D:strips"),
+                     _ns(T_EST[-1]))
+    (line,) = thr
+    assert [p[1] for p in line] == pytest.approx([0.6, 0.6])
+    assert 10 ** line[0][0] == pytest.approx(0.5) and 10 ** line[1][0] == pytest.approx(50.0)
+    labels = _latest_at(_rows(recorded["chunks"], coherence_path("q", "de") + "/grid", "Points2D:labels"),
+                        _ns(T_EST[-1]))
+    assert labels[-1] == "γ² partial"
+    first = _latest_at(_rows(recorded["chunks"], coherence_path("q", "de") + "/grid", "Points2D:labels"),
+                       _ns(T_EST[0]))
+    assert first[-1] == "γ² ordinary"
 
 
-def test_bode_strips_are_log10_omega_and_values(recorded):
+def _transform(chunks, path, t_ns):
+    scale = _latest_at(_rows(chunks, path, "Transform3D:scale"), t_ns)
+    trans = _latest_at(_rows(chunks, path, "Transform3D:translation"), t_ns)
+    return np.array(scale[0]), np.array(trans[0])
+
+
+def test_bode_strips_masked_phase_referenced_and_inside_their_box(recorded):
     omega = recorded["omega"]
-    x = np.log10(omega).astype(np.float32)
+    x = np.log10(omega)
     coh, mag, pha, _ = recorded["estimates"][-1]
+    t_ns = _ns(T_EST[-1])
     for io, o in enumerate(OUTPUTS):
         for ii, i in enumerate(INPUTS):
-            for path, y in ((magnitude_path(o, i), mag[io, ii]), (phase_path(o, i), pha[io, ii])):
-                strips = _at(_rows(recorded["chunks"], path, "LineStrips2D:strips"), _ns(T_EST[-1]))
-                ok = np.isfinite(y)
-                expected = np.column_stack([x[ok], y[ok].astype(np.float32)])
-                got = np.concatenate([np.asarray(s, dtype=np.float32) for s in strips])
-                np.testing.assert_array_equal(got, expected)
-                assert len(strips) == (2 if not ok.all() else 1)    # a gap splits, never bridges
-    # the display transform (y flipped, decades spread) and a grid are static on the entity
-    scale = _rows(recorded["chunks"], magnitude_path("q", "de"), "Transform3D:scale")
-    assert scale[0][0] is None and scale[0][1][0][1] < 0
-    labels = _rows(recorded["chunks"], magnitude_path("q", "de") + "/grid", "Points2D:labels")
-    assert labels and labels[-1][0] is None
-    # omega spans 0.5..40 rad/s: the grid spans the 1-2-5 values 0.5..50, labelled at its ends and decades
-    assert labels[-1][1][:4] == ["0.5", "1", "10", "50 rad/s"]
-    assert any(s.endswith(" dB") for s in labels[-1][1])
+            c = coh[io, ii]
+            ref = _reference(pha[io, ii], c)
+            assert -180.0 < ref[np.flatnonzero(c >= 0.6)[0]] <= 180.0
+            for path, y, kind in ((magnitude_path(o, i), mag[io, ii], "magnitude"),
+                                  (phase_path(o, i), ref, "phase")):
+                strips = _check_masked_curve(recorded["chunks"], path, t_ns, x, y, c)
+                # the transform maps every drawn point into the plot's box, y up (flipped)
+                scale, trans = _transform(recorded["chunks"], path, t_ns)
+                assert scale[0] > 0 and scale[1] < 0
+                bx, by, w, h = plot_box(kind, len(INPUTS))
+                pts = np.concatenate(strips).astype(np.float64)
+                shown = pts * scale[:2] + trans[:2]
+                assert np.all(shown[:, 0] >= bx - 1e-3) and np.all(shown[:, 0] <= bx + w + 1e-3)
+                assert np.all(shown[:, 1] >= by - 1e-3) and np.all(shown[:, 1] <= by + h + 1e-3)
+                # and the frequency axis spans the 1-2-5 values around the grid: 0.5 .. 50 rad/s
+                assert (np.log10(0.5) * scale[0] + trans[0], np.log10(50.0) * scale[0] + trans[0]) == \
+                    pytest.approx((bx, bx + w), abs=1e-3)      # float32 transform
+    # a gap (NaN) in the magnitude splits the curve instead of bridging it
+    strips, _ = _curve(recorded["chunks"], magnitude_path("p", "de"), t_ns)
+    gap = np.float32(x[11])
+    assert not any(np.any(s[:, 0] == gap) for s in strips)
+    # the grid: frequency ticks at the 1-2-5 values in rad/s, value ticks, the axis name last
+    labels = _latest_at(_rows(recorded["chunks"], magnitude_path("q", "de") + "/grid", "Points2D:labels"), t_ns)
+    assert labels[:7] == ["0.5", "1", "2", "5", "10", "20", "50 rad/s"]
+    assert labels[-1] == "|H| dB"
+    values = [float(v) for v in labels[7:-1]]
+    assert values == sorted(values) and len(values) <= 6
+    ok = coh[0, 0] >= 0.6
+    assert values[0] <= mag[0, 0][ok].min() and values[-1] >= mag[0, 0][ok].max()
+    plabels = _latest_at(_rows(recorded["chunks"], phase_path("q", "de") + "/grid", "Points2D:labels"), t_ns)
+    assert plabels[-1] == "phase deg"
+
+
+def test_plot_range_follows_the_data_and_shrinks(tmp_path):
+    """A phase that once spanned thousands of degrees no longer fixes the grid once it is gone."""
+    path = tmp_path / "range.rrd"
+    omega = np.logspace(-0.5, 1.5, 40)
+    x = np.log10(omega)
+    coh = np.full((1, 1, omega.size), 0.9)
+    mag = (-20 * x)[None, None, :]
+    wild = (-90 - 2000 * (x - x[0]))[None, None, :]         # -90 .. -4090 deg: many turns
+    calm = (-90 - 60 * (x - x[0]))[None, None, :]
+    view = RerunView(["de"], ["q"], save_path=path, waterfall_rows=0)
+    try:
+        view.log_estimate(1.0, omega, ["q"], ["de"], coh, mag, wild, [], "x", [])
+        view.log_estimate(2.0, omega, ["q"], ["de"], coh, mag, calm, [], "x", [])
+        view.log_estimate(3.0, omega, ["q"], ["de"], coh, mag, calm + 5.0, [], "x", [])
+    finally:
+        view.close()
+    chunks = RrdReader(path).stream().to_chunks()
+    grid = _rows(chunks, phase_path("q", "de") + "/grid", "Points2D:labels")
+    scale = _rows(chunks, phase_path("q", "de"), "Transform3D:scale")
+
+    def value_labels(t):
+        labels = _latest_at(grid, _ns(t))
+        k = next(k for k, v in enumerate(labels) if v.endswith(" rad/s"))    # frequency ticks come first
+        return [float(v) for v in labels[k + 1:-1]]
+
+    assert min(value_labels(1.0)) <= -4090 + 1e-9
+    calm_labels = value_labels(2.0)
+    assert min(calm_labels) >= -300 and max(calm_labels) <= 180        # shrunk to the new data
+    assert calm_labels[0] <= -90 - 60 * (x[-1] - x[0]) and calm_labels[-1] >= -90
+    # a 5-degree move is inside the hysteresis: no new grid or transform at t = 3 s
+    assert _ns(3.0) not in {t for t, _ in grid} and _ns(3.0) not in {t for t, _ in scale}
 
 
 def test_waterfall_holds_coherence_history_in_percent(recorded):
@@ -195,15 +338,22 @@ def test_adequacy_table_fraction_and_alerts(recorded):
     assert [t for t, _ in docs] == list(_ns(T_EST))
     text = docs[-1][1][0]
     assert "**Verdict: adequate**" in text and "reason 1 \\| piped" in text
+    assert "partial γ² (MISO-conditioned)" in text and "ordinary" not in text
+    assert "ordinary γ²" in docs[0][1][0]                    # the default kind
+    assert "- de: sweeping 3.2 rad/s, 45 s to the band top" in text
+    assert "- da: not sweeping" in text
     assert "| pair | adequate band [rad/s] | fraction | verdict |" in text
     rows = recorded["estimates"][-1][3]
     for r in rows:
         line = next(ln for ln in text.splitlines() if ln.startswith(f"| {r['output']}/{r['input']} |"))
-        assert f"{100 * r['fraction']:.0f} %" in line
+        assert f"| {percent(r['fraction'], 0.6)} |" in line
         if r["band"] is None:
             assert "| — |" in line and line.endswith("| not adequate |")
         else:
-            assert f"{r['band'][0]:.3g} – {r['band'][1]:.3g}" in line and line.endswith("| adequate |")
+            assert f"{r['band'][0]:.3g} – {r['band'][1]:.3g}" in line
+            assert line.endswith("| adequate |" if r["fraction"] >= 0.6 else "| partly adequate |")
+    q_de = next(ln for ln in text.splitlines() if ln.startswith("| q/de |"))
+    assert "| 59.9 % |" in q_de and "60 %" not in q_de        # 0.5999 is not shown as 60 %
     media = _rows(recorded["chunks"], ADEQUACY_PATH, "TextDocument:media_type")
     assert media[-1][1] == ["text/markdown"]
 
@@ -214,6 +364,55 @@ def test_adequacy_table_fraction_and_alerts(recorded):
     assert [v[0] for _, v in texts] == ["[coverage] no energy below 0.8 rad/s", "[saturation] de at 98 %"]
     assert {t for t, _ in texts} == {int(_ns(8.5))}
     assert [v[0] for _, v in levels] == ["WARN", "WARN"]
+
+
+def test_sweep_frequency_and_time_remaining_series(recorded):
+    t_ns = _ns(T_EST[1])
+    f = _rows(recorded["chunks"], sweep_frequency_path("de"), "Scalars:scalars")
+    rem = _rows(recorded["chunks"], time_remaining_path("de"), "Scalars:scalars")
+    assert f == [(t_ns, [3.2])] and rem == [(t_ns, [45.0])]      # only the estimate that had a sweep
+    (f_da,) = _rows(recorded["chunks"], sweep_frequency_path("da"), "Scalars:scalars")
+    (r_da,) = _rows(recorded["chunks"], time_remaining_path("da"), "Scalars:scalars")
+    assert f_da[0] == t_ns and np.isnan(f_da[1][0]) and np.isnan(r_da[1][0])    # unknown: NaN, a gap
+    names = _rows(recorded["chunks"], sweep_frequency_path("de"), "SeriesLines:names")
+    assert names == [(None, ["de [rad/s]"])]
+    assert _rows(recorded["chunks"], time_remaining_path("de"), "SeriesLines:names") == [(None, ["de [s]"])]
+
+
+def test_test_point_history(recorded):
+    docs = _rows(recorded["chunks"], TEST_POINTS_PATH, "TextDocument:text")
+    assert [t for t, _ in docs] == [int(_ns(t)) for t, _ in TEST_POINTS]
+    first = docs[0][1][0]
+    assert first.startswith("**Test point 1 (open): WAIT**, sweeping de, from 1.5 s, 0 s so far, found by marker")
+    judged = docs[1][1][0]
+    assert "| pair | adequate band [rad/s] | fraction | verdict | still missing |" in judged
+    assert "| q/de | 0.8 – 20 | 59.9 % | NOT adequate | 1 below |" in judged
+    assert "- q/de needs 0.3-0.8 rad/s: about 2 more minute(s) of sweep at low frequency" in judged
+    assert "coherence judged: ordinary γ²" in judged
+    last = docs[-1][1][0]
+    # one entry per test point: the open one first, then the closed one (replacing its open record)
+    assert last.count("**Test point") == 2
+    assert last.index("**Test point 2 (open): WAIT**") < last.index("**Test point 1 (closed): GO**")
+    assert "1.5 – 6.0 s (4 s)" in last and "coherence judged: partial γ²" in last
+    assert "| q/de | 0.4 – 20 | 75 % | adequate | — |" in last
+    assert "- da needs a sweep over 0.3-20 rad/s" in last
+    assert "59.9 %" not in last                                 # the open record of tp 1 is gone
+
+
+def test_test_point_history_is_bounded(tmp_path):
+    view = RerunView(["de"], ["q"], save_path=tmp_path / "tp.rrd", test_point_history=3)
+    try:
+        for k in range(6):
+            view.log_test_point(10.0 * k + 5, {"state": "closed", "start_s": 10.0 * k, "end_s": 10.0 * k + 5,
+                                                "source": "sweep", "swept_input": "de", "verdict": "GO",
+                                                "pairs": [], "missing": []})
+        with pytest.raises(TypeError, match="dict"):
+            view.log_test_point(60.0, [1, 2])
+    finally:
+        view.close()
+    docs = _rows(RrdReader(tmp_path / "tp.rrd").stream().to_chunks(), TEST_POINTS_PATH, "TextDocument:text")
+    last = docs[-1][1][0]
+    assert [int(m) for m in re.findall(r"\*\*Test point (\d+)", last)] == [6, 5, 4]     # newest first, 3 kept
 
 
 def test_rrd_has_blueprint_and_verifies(recorded):
@@ -268,7 +467,7 @@ def test_blueprint_is_pure_and_covers_every_entity(recorded):
     assert rr.get_global_data_recording() is None        # built without creating or touching a recording
     assert isinstance(bp, rrb.Blueprint)
     views = _views(bp)
-    assert len(views) == 5 + 4 * len(INPUTS) * len(OUTPUTS)
+    assert len(views) == 8 + 2 * len(INPUTS) * len(OUTPUTS)
     # the same inputs give the same layout (names, kinds, origins)
     again = _views(default_blueprint(INPUTS, OUTPUTS))
     assert [(type(v), v.name, v.origin, v.contents) for v in views] == \
@@ -277,19 +476,20 @@ def test_blueprint_is_pure_and_covers_every_entity(recorded):
     by_type = {}
     for v in views:
         by_type.setdefault(type(v).__name__, []).append(v)
-    assert {str(v.origin) for v in by_type["TimeSeriesView"]} == {"/telemetry/inputs", "/telemetry/outputs",
-                                                                  "/" + FRACTION_PATH}
-    assert [str(v.origin) for v in by_type["TextDocumentView"]] == ["/" + ADEQUACY_PATH]
+    assert {str(v.origin) for v in by_type["TimeSeriesView"]} == {
+        "/telemetry/inputs", "/telemetry/outputs", "/" + FRACTION_PATH, "/status/sweep_frequency",
+        "/status/time_remaining"}
+    assert [str(v.origin) for v in by_type["TextDocumentView"]] == ["/" + ADEQUACY_PATH, "/" + TEST_POINTS_PATH]
     assert [str(v.origin) for v in by_type["TextLogView"]] == ["/" + ALERTS_PATH]
-    assert {str(v.origin) for v in by_type["BarChartView"]} == {"/" + coherence_path(o, i)
-                                                               for o in OUTPUTS for i in INPUTS}
+    assert "BarChartView" not in by_type                   # coherence is drawn on the log frequency axis
     assert {str(v.origin) for v in by_type["TensorView"]} == {"/" + waterfall_path(o, i)
                                                              for o in OUTPUTS for i in INPUTS}
     assert {str(v.origin) for v in by_type["Spatial2DView"]} == {"/" + pair_path(o, i)
                                                                 for o in OUTPUTS for i in INPUTS}
     # every entity the view wrote is shown by a view of the right kind
-    kinds = {"telemetry": "TimeSeriesView", "coherence": "BarChartView", "waterfall": "TensorView",
-             "magnitude_db": "Spatial2DView", "phase_deg": "Spatial2DView"}
+    kinds = {"telemetry": "TimeSeriesView", "coherence": "Spatial2DView", "waterfall": "TensorView",
+             "magnitude_db": "Spatial2DView", "phase_deg": "Spatial2DView", "sweep_frequency": "TimeSeriesView",
+             "time_remaining": "TimeSeriesView", "test_points": "TextDocumentView"}
     entities = {c.entity_path for c in recorded["chunks"]} - {"/__properties"}
     for e in sorted(entities):
         showing = [v for v in views if _covers(v, e)]
@@ -297,9 +497,23 @@ def test_blueprint_is_pure_and_covers_every_entity(recorded):
         want = next((k for part, k in kinds.items() if part in e.split("/")), None)
         if want:
             assert {type(v).__name__ for v in showing} == {want}, e
-    # a Bode view shows only its own curve (magnitude and phase have different display transforms)
-    assert not any(_covers(v, "/" + phase_path("q", "de")) for v in by_type["Spatial2DView"]
-                   if "|H|" in str(v.name))
+    # a pair's view shows its three frequency plots (and only its own): one view, so aligned axes
+    (pv,) = [v for v in by_type["Spatial2DView"] if str(v.origin) == "/" + pair_path("q", "de")]
+    for path in (coherence_path, magnitude_path, phase_path):
+        assert _covers(pv, "/" + path("q", "de")) and not _covers(pv, "/" + path("p", "de"))
+
+
+def test_plot_boxes_stack_inside_the_visual_bounds():
+    for n in (1, 2, 4):
+        left, right, top, bottom = plot_margins(n)
+        assert (left, top) == (90.0 * n, 50.0 * n)               # labels keep their size on screen
+        boxes = [plot_box(k, n) for k in ("coherence", "magnitude", "phase")]
+        assert len({(b[0], b[2]) for b in boxes}) == 1          # same x and width: the frequency axes line up
+        for upper, lower in zip(boxes, boxes[1:]):
+            assert lower[1] >= upper[1] + upper[3] + top + bottom - 1e-9     # labels of one never on the next
+        assert boxes[1][3] > boxes[0][3] and boxes[0][3] == 150.0 * n
+    with pytest.raises(ValueError, match="plot kind"):
+        plot_box("waterfall", 1)
 
 
 def test_blueprint_rejects_colliding_pair_paths():
@@ -336,6 +550,12 @@ def test_bad_inputs_name_what_is_wrong(tmp_path):
             view.log_timeseries(np.arange(3.0), ["de", "q"], np.zeros((2, 4)), ["input", "output"])
         with pytest.raises(ValueError, match="finite"):
             view.log_timeseries(np.array([0.0, np.nan]), ["de"], np.zeros((1, 2)), ["input"])
+        with pytest.raises(ValueError, match="one unit per name"):
+            view.log_timeseries(np.arange(3.0), ["de"], np.zeros((1, 3)), ["input"], units=["deg", "deg"])
+        with pytest.raises(ValueError, match="coherence_kind must be 'ordinary' or 'partial'"):
+            view.log_estimate(1.0, w, ["q"], ["de"], ok, ok, ok, [], "x", [], coherence_kind="multiple")
+        with pytest.raises(ValueError, match=r"sweep\['de'\]"):
+            view.log_estimate(1.0, w, ["q"], ["de"], ok, ok, ok, [], "x", [], sweep={"de": 3.0})
     finally:
         view.close()
     with pytest.raises(ValueError, match="spawn"):

@@ -2,17 +2,29 @@
 
 Entity layout (every path below is relative to the recording root; Rerun shows it with a leading ``/``)::
 
-    telemetry/inputs/<name>            Scalars, one series per signal, timeline "flight_time"
+    telemetry/inputs/<name>            Scalars, one series per signal, timeline "flight_time"; the
+                                       series name carries the unit ("da [deg]")
     telemetry/outputs/<name>           Scalars
-    spectra/<out>_<in>/coherence       BarChart: values = gamma^2, abscissa = omega [rad/s]
-    spectra/<out>_<in>/magnitude_db    LineStrips2D, points (log10 omega, |H| [dB]) + a static display transform
-    spectra/<out>_<in>/magnitude_db/grid   static grid lines and labels for that plot
+    spectra/<out>_<in>/coherence       LineStrips2D + Points2D, points (log10 omega, gamma^2), grey
+                                       below the threshold; Coherence:values (exact gamma^2, float64)
+                                       and Coherence:kind ("ordinary" or "partial")
+    spectra/<out>_<in>/coherence/grid       grid lines and tick labels of that plot
+    spectra/<out>_<in>/coherence/threshold  the coherence threshold (0.6) as a line
+    spectra/<out>_<in>/magnitude_db    LineStrips2D, points (log10 omega, |H| [dB]) + a display transform
+    spectra/<out>_<in>/magnitude_db/grid   grid lines and labels for that plot
     spectra/<out>_<in>/phase_deg       LineStrips2D, points (log10 omega, phase [deg])
     spectra/<out>_<in>/phase_deg/grid
     spectra/<out>_<in>/waterfall       Tensor (estimate x frequency bin) of gamma^2 in percent
-    status/adequacy                    TextDocument (markdown table)
+    status/adequacy                    TextDocument (verdict, coherence kind, sweep, markdown table)
     status/adequacy_fraction           Scalars, one series per pair: adequate fraction of the band
+    status/sweep_frequency/<input>     Scalars: the input's current sweep frequency [rad/s]
+    status/time_remaining/<input>      Scalars: sweep time still needed to the band's top [s]
+    status/test_points                 TextDocument: the test points (open one first, then the closed ones)
     status/alerts                      TextLog, level WARN
+
+The three frequency plots of a pair are drawn in a fixed box of display units
+(:func:`plot_box`), so each view's visual bounds are fixed here and the data are mapped into the
+box by a transform the view logs whenever the plotted range changes.
 
 Names are escaped with :func:`rerun.escape_entity_path_part`, so a channel called ``roll rate`` or
 ``a/b`` stays one path part.
@@ -26,15 +38,32 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 __all__ = [
-    "TIMELINE", "ADEQUACY_PATH", "ALERTS_PATH", "FRACTION_PATH",
-    "telemetry_path", "pair_path", "coherence_path", "magnitude_path", "phase_path", "waterfall_path",
-    "pair_label", "check_names", "default_blueprint",
+    "TIMELINE", "ADEQUACY_PATH", "ALERTS_PATH", "FRACTION_PATH", "TEST_POINTS_PATH", "SWEEP_FREQUENCY_PATH",
+    "TIME_REMAINING_PATH", "telemetry_path", "pair_path", "coherence_path", "magnitude_path", "phase_path",
+    "waterfall_path", "sweep_frequency_path", "time_remaining_path", "pair_label", "check_names", "plot_box",
+    "plot_margins", "PLOT_MARGINS", "default_blueprint",
 ]
 
 TIMELINE = "flight_time"
 ADEQUACY_PATH = "status/adequacy"
 ALERTS_PATH = "status/alerts"
 FRACTION_PATH = "status/adequacy_fraction"
+TEST_POINTS_PATH = "status/test_points"
+SWEEP_FREQUENCY_PATH = "status/sweep_frequency"
+TIME_REMAINING_PATH = "status/time_remaining"
+
+#: Display units around each frequency plot's box for its tick labels, (left, right, top, bottom),
+#: for one input column; with n inputs the columns are n times narrower, so the margins (which
+#: hold labels of a fixed size on screen) are n times wider in display units (:func:`plot_margins`).
+PLOT_MARGINS = (90.0, 45.0, 50.0, 55.0)
+_PLOT_WIDTH = 1000.0
+#: The frequency plots of a pair, top to bottom, and each box's height for one input column
+#: (display units). All three share one view, so their frequency axes line up whatever the
+#: window's shape.
+_PLOT_ORDER = ("coherence", "magnitude", "phase")
+_PLOT_HEIGHT = {"coherence": 150.0, "magnitude": 240.0, "phase": 240.0}
+#: Row shares of a pair's column: the frequency plots' view, the coherence waterfall.
+_ROW_SHARES = (3.0, 0.55)
 
 _KIND_DIR = {"input": "inputs", "output": "outputs"}
 
@@ -69,6 +98,47 @@ def waterfall_path(output: str, input: str) -> str:  # noqa: A002
     return f"{pair_path(output, input)}/waterfall"
 
 
+def sweep_frequency_path(input: str) -> str:  # noqa: A002
+    """``status/sweep_frequency/<input>``: the input's current sweep frequency [rad/s]."""
+    return f"{SWEEP_FREQUENCY_PATH}/{rr.escape_entity_path_part(str(input))}"
+
+
+def time_remaining_path(input: str) -> str:  # noqa: A002
+    """``status/time_remaining/<input>``: sweep time still needed to reach the band's top [s]."""
+    return f"{TIME_REMAINING_PATH}/{rr.escape_entity_path_part(str(input))}"
+
+
+def plot_margins(n_inputs: int) -> tuple[float, float, float, float]:
+    """(left, right, top, bottom) display units around each frequency plot's box for its labels."""
+    n = max(1, int(n_inputs))
+    return tuple(m * n for m in PLOT_MARGINS)
+
+
+def plot_box(kind: str, n_inputs: int) -> tuple[float, float, float, float]:
+    """``(x, y, width, height)`` of a frequency plot's box in its pair's view (display units, y down).
+
+    kind is ``"coherence"``, ``"magnitude"`` or ``"phase"`` (stacked in that order, each with
+    :func:`plot_margins` around it). The boxes are taller for more inputs (narrower columns), so
+    the stack keeps about the aspect of its panel in the default blueprint.
+    """
+    if kind not in _PLOT_HEIGHT:
+        raise ValueError(f"plot kind must be 'coherence', 'magnitude' or 'phase', got {kind!r}")
+    n = max(1, int(n_inputs))
+    _, _, top, bottom = plot_margins(n)
+    y = 0.0
+    for k in _PLOT_ORDER:
+        if k == kind:
+            return 0.0, y, _PLOT_WIDTH, _PLOT_HEIGHT[k] * n
+        y += _PLOT_HEIGHT[k] * n + bottom + top
+    raise AssertionError(kind)
+
+
+def _visual_bounds(n_inputs: int) -> rrb.VisualBounds2D:
+    left, right, top, bottom = plot_margins(n_inputs)
+    _, y, w, h = plot_box(_PLOT_ORDER[-1], n_inputs)
+    return rrb.VisualBounds2D(x_range=(-left, w + right), y_range=(-top, y + h + bottom))
+
+
 def pair_label(output: str, input: str) -> str:  # noqa: A002
     """How a pair is named to the engineer: ``output/input``."""
     return f"{output}/{input}"
@@ -94,24 +164,24 @@ def check_names(inputs: Sequence[str], outputs: Sequence[str]) -> None:
             paths[p] = (o, i)
 
 
-def _pair_views(output: str, input: str) -> rrb.Vertical:  # noqa: A002
-    """Four stacked views for one pair: coherence bars, |H| [dB], phase [deg], coherence waterfall."""
+def _pair_views(output: str, input: str, n_inputs: int) -> rrb.Vertical:  # noqa: A002
+    """Two stacked views for one pair: coherence, |H| [dB] and phase [deg] against log omega in
+    one view (aligned frequency axes), and the coherence waterfall."""
     label = pair_label(output, input)
     root = "/" + pair_path(output, input)
+    # The origin is the pair folder (not an entity): the display transform logged on each plot
+    # entity only takes effect relative to a view origin above it.
     return rrb.Vertical(
-        rrb.BarChartView(origin="/" + coherence_path(output, input), name=f"{label}  γ² vs ω [rad/s]"),
-        # The origin is the pair folder (not the entity): the display transform logged on
-        # magnitude_db / phase_deg only takes effect relative to a view origin above it.
-        rrb.Spatial2DView(origin=root, contents=["$origin/magnitude_db/**"],
-                          name=f"{label}  |H| [dB] vs log10 ω"),
-        rrb.Spatial2DView(origin=root, contents=["$origin/phase_deg/**"],
-                          name=f"{label}  phase [deg] vs log10 ω"),
+        rrb.Spatial2DView(origin=root,
+                          contents=["$origin/coherence/**", "$origin/magnitude_db/**", "$origin/phase_deg/**"],
+                          name=f"{label}  γ², |H| [dB], phase [deg] vs ω [rad/s]; grey: γ² < 0.6",
+                          visual_bounds=_visual_bounds(n_inputs)),
         rrb.TensorView(origin="/" + waterfall_path(output, input), name=f"{label}  γ² [%] waterfall",
                        slice_selection=rrb.TensorSliceSelection(width=1, height=0),
                        scalar_mapping=rrb.TensorScalarMapping(colormap="viridis"),
                        view_fit="fill"),
         name=label,
-        row_shares=[1.0, 1.2, 1.2, 1.0],
+        row_shares=list(_ROW_SHARES),
     )
 
 
@@ -119,31 +189,42 @@ def default_blueprint(inputs: Sequence[str], outputs: Sequence[str], *,
                       history_s: float = 30.0) -> rrb.Blueprint:
     """The default layout of the live view. Pure: builds objects, logs nothing.
 
-    Left column: input and output time series (last ``history_s`` seconds of flight time), the
-    adequacy table, the adequate-fraction history and the alerts. Right: one tab per output, each
-    with one column per input holding that pair's coherence bars, Bode magnitude and phase, and
-    coherence waterfall.
+    Three columns. Left: input and output time series (last ``history_s`` seconds of flight
+    time), the sweep frequency [rad/s] and the time still needed [s] per input, and the
+    adequate-fraction history. Middle: the status (verdict, coherence kind, sweep, adequacy
+    table), the test points and the alerts. Right: one tab per output, each with one column per
+    input holding that pair's coherence, Bode magnitude and phase against log frequency (one
+    view) and its coherence waterfall. The time panel starts collapsed (its time bar stays).
     """
     inputs, outputs = list(inputs), list(outputs)
     check_names(inputs, outputs)
     window = rrb.VisibleTimeRange(TIMELINE,
                                   start=rrb.TimeRangeBoundary.cursor_relative(seconds=-float(history_s)),
                                   end=rrb.TimeRangeBoundary.cursor_relative())
-    left = rrb.Vertical(
+    series = rrb.Vertical(
         rrb.TimeSeriesView(origin="/telemetry/inputs", name="Inputs", time_ranges=window),
         rrb.TimeSeriesView(origin="/telemetry/outputs", name="Outputs", time_ranges=window),
-        rrb.TextDocumentView(origin="/" + ADEQUACY_PATH, name="Excitation adequacy"),
+        rrb.TimeSeriesView(origin="/" + SWEEP_FREQUENCY_PATH, name="Sweep frequency [rad/s]"),
+        rrb.TimeSeriesView(origin="/" + TIME_REMAINING_PATH, name="Sweep time to band top [s]"),
         rrb.TimeSeriesView(origin="/" + FRACTION_PATH, name="Adequate fraction of band",
                            axis_y=rrb.ScalarAxis(range=(0.0, 1.0))),
-        rrb.TextLogView(origin="/" + ALERTS_PATH, name="Alerts"),
-        name="Telemetry and status",
-        row_shares=[1.0, 1.0, 1.4, 0.6, 0.8],
+        name="Time series",
+        row_shares=[1.0, 1.0, 0.7, 0.7, 0.7],
     )
-    tabs = [rrb.Horizontal(*[_pair_views(o, i) for i in inputs], name=o) for o in outputs]
+    status = rrb.Vertical(
+        rrb.TextDocumentView(origin="/" + ADEQUACY_PATH, name="Status and excitation adequacy"),
+        rrb.TextDocumentView(origin="/" + TEST_POINTS_PATH, name="Test points"),
+        rrb.TextLogView(origin="/" + ALERTS_PATH, name="Alerts",
+                        columns=rrb.TextLogColumns(text_log_columns=["LogLevel", "Body"])),
+        name="Status",
+        row_shares=[1.3, 1.2, 0.6],
+    )
+    n_in = max(1, len(inputs))
+    tabs = [rrb.Horizontal(*[_pair_views(o, i, n_in) for i in inputs], name=o) for o in outputs]
     right = rrb.Tabs(*tabs, name="Spectra by output") if tabs else rrb.Tabs(name="Spectra by output")
     return rrb.Blueprint(
-        rrb.Horizontal(left, right, column_shares=[1.0, 2.0]),
-        rrb.TimePanel(timeline=TIMELINE, play_state="following"),
+        rrb.Horizontal(series, status, right, column_shares=[0.85, 1.0, 2.15]),
+        rrb.TimePanel(timeline=TIMELINE, play_state="following", state="collapsed"),
         collapse_panels=True,
         auto_views=False,
     )

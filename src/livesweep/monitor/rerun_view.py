@@ -3,31 +3,39 @@
 What the engineer sees, and how each item is represented (entity paths: :mod:`.blueprint`):
 
 * **Time series** of inputs and outputs: ``rr.Scalars`` per signal, sent in blocks with
-  ``send_columns`` on the ``flight_time`` timeline (a duration; ``round(t_s * 1e9)`` ns).
-* **Coherence** per pair: ``rr.BarChart`` with ``abscissa = omega [rad/s]`` and bar ``widths`` from
-  the grid spacing (Rerun's default width is 1 rad/s, which would smear a log grid). The bar
-  chart view has real axes and hover, so ω and γ² are read directly.
-* **Magnitude [dB] and phase [deg]** per pair: ``rr.LineStrips2D`` whose points are
-  ``(log10 omega, value)``, exactly the numbers the estimator produced (float32). Rerun's 2-D
-  view has y pointing down and equal axis scales, so a *static* ``rr.Transform3D`` on the entity
-  scales the display (1 decade = 150 units; 1 dB = 1.5 units; 1 deg = 0.5 unit) and flips y; a
-  static grid with labelled decades (rad/s) and dB/deg lines is a child entity, so it gets the
-  same transform. The view origin is the pair folder, which is what makes the transform apply.
+  ``send_columns`` on the ``flight_time`` timeline (a duration; ``round(t_s * 1e9)`` ns). The
+  legend names carry the units (``"da [deg]"``).
+* **Frequency plots** per pair, all three against ``log10 omega`` with ticks at the 1-2-5 values
+  labelled in rad/s: coherence gamma^2 (line and points, 0..1, the threshold 0.6 as an orange
+  line), |H| [dB] and phase [deg]. Rerun has no log axis, so each is a ``rr.LineStrips2D`` whose
+  points are ``(log10 omega, value)`` in a Spatial2DView with fixed visual bounds; a
+  ``rr.Transform3D`` on the entity maps the plotted range onto the view's box (y up) and is
+  logged again, at the estimate's time, whenever that range changes; the grid and its labels
+  are a child entity, so they get the same transform.
+  *Masking*: where gamma^2 < 0.6 the curves are drawn **grey and thin** on all three plots (and
+  the coherence points grey); a masked magnitude or phase point outside the plotted range is
+  not drawn. The plotted range follows the coherent points (:func:`.freq_plot.value_extent`:
+  it grows at once and shrinks when it is more than 1.6 times what the data need).
+  *Phase*: unwrapped along frequency and moved by whole turns so its value at the lowest
+  coherent frequency lies in (-180, 180] deg.
+  The coherence entity also carries ``Coherence:values`` (the exact gamma^2, float64) and
+  ``Coherence:kind`` (``"ordinary"`` or ``"partial"``, also written above the plot's axis).
 * **Coherence waterfall** per pair: ``rr.Tensor`` of shape (estimates, frequency bins) holding
-  γ² in **percent as uint8** (value range 0..100), the last ``waterfall_rows`` estimates with the
-  newest in the last row, shown in a TensorView with the viridis colormap. A tensor (not an
-  Image or DepthImage) because the TensorView maps scalars through a colormap with a fixed
-  range and names the two axes; an Image would need its own colour conversion and a DepthImage
-  would claim metres. uint8 percent keeps the re-logged history small (the exact γ² is in the
-  bar chart); see "Costs" below.
-* **Adequacy**: a markdown ``rr.TextDocument`` (pair, adequate band, fraction, verdict, plus the
-  overall verdict and its reasons) and ``status/adequacy_fraction``, one series per pair.
+  gamma^2 in **percent as uint8** (value range 0..100), the last ``waterfall_rows`` estimates with
+  the newest in the last row, shown in a TensorView with the viridis colormap. The bins are the
+  estimator's log-spaced grid, so its x axis is logarithmic too.
+* **Status**: a markdown ``rr.TextDocument`` (verdict, which coherence was judged, the sweep
+  frequency and time still needed per input, the reasons, and the adequacy table with
+  percentages from :func:`livesweep.monitor.text.percent`), ``status/adequacy_fraction`` (one
+  series per pair), ``status/sweep_frequency/<input>`` [rad/s] and ``status/time_remaining/<input>``
+  [s] (NaN while unknown).
+* **Test points**: a markdown ``rr.TextDocument`` with the open test point and the closed ones.
 * **Alerts**: ``rr.TextLog`` at level WARN, text ``"[kind] message"``.
 
 Costs: ``rr.log`` with archetype objects costs ~0.3-1.4 ms per spectral entity (the Python-side
-tensor conversion), i.e. >100 ms per update for 48 pairs. The hot path therefore builds the Arrow
+conversion), i.e. >100 ms per update for 48 pairs. The hot path therefore builds the Arrow
 arrays itself (``_tensor_array``, ``_strips_array``) and logs them as described component
-batches; the grid/abscissa/width batches are built once per frequency grid and reused.
+batches; grids and transforms are logged only when they change.
 
 Viewer modes: ``save_path`` (an ``.rrd`` file with the blueprint), ``spawn`` (the desktop viewer;
 blocks ~11 s and fails without a display), ``serve`` (the bundled ``rerun`` CLI as a child process
@@ -62,22 +70,32 @@ import rerun as rr
 from rerun.encodings.tensor_data_ext import DTYPE_MAP
 
 from livesweep.monitor.blueprint import (
-    ADEQUACY_PATH, ALERTS_PATH, FRACTION_PATH, TIMELINE, check_names, coherence_path, default_blueprint,
-    magnitude_path, pair_label, phase_path, telemetry_path, waterfall_path,
+    ADEQUACY_PATH, ALERTS_PATH, FRACTION_PATH, TEST_POINTS_PATH, TIMELINE, check_names,
+    coherence_path, default_blueprint, magnitude_path, pair_label, phase_path, plot_box, plot_margins,
+    sweep_frequency_path,
+    telemetry_path, time_remaining_path, waterfall_path,
 )
+from livesweep.monitor.freq_plot import (
+    MAG_STEPS_DB, PHASE_STEPS_DEG, frequency_extent, log_ticks, masked_runs, reference_phase, tick_label,
+    value_extent,
+)
+from livesweep.monitor.text import adequacy_markdown, coherence_kind_text, markdown_test_points
+from livesweep.spectral.adequacy import MIN_COHERENCE
 
-__all__ = ["RerunView", "find_rerun_cli", "MAG_DISPLAY_SCALE", "PHASE_DISPLAY_SCALE"]
+__all__ = ["RerunView", "find_rerun_cli", "series_label", "adequacy_markdown"]
 
 log = logging.getLogger(__name__)
 
-#: Display transform of the Bode plots: (units per decade of ω, units per dB or deg); y is flipped.
-MAG_DISPLAY_SCALE = (150.0, 1.5)
-PHASE_DISPLAY_SCALE = (150.0, 0.5)
-
-_MAG_COLOR = (31, 119, 180)
-_PHASE_COLOR = (214, 39, 40)
-_GRID_COLOR = (128, 128, 128, 110)
-_GRID_MINOR_COLOR = (128, 128, 128, 50)
+_MAG_COLOR = (66, 146, 230)
+_PHASE_COLOR = (236, 88, 80)
+_COH_COLOR = (60, 190, 90)
+_MASKED_COLOR = (125, 125, 125, 200)
+_THRESHOLD_COLOR = (255, 165, 0)
+_GRID_COLOR = (150, 150, 150, 120)
+_GRID_MINOR_COLOR = (150, 150, 150, 45)
+#: Line radii [ui points; Rerun encodes ui points as negative radii] of coherent and masked stretches.
+_CURVE_RADIUS = -1.5
+_MASKED_RADIUS = -0.6
 
 
 # --------------------------------------------------------------------------------------------
@@ -111,6 +129,7 @@ _BUFFER_IDX = {dt: [f.name for f in _BUFFER_T].index(name) for dt, name in DTYPE
 _TYPE_ID_BUF = {i: pa.py_buffer(np.array([i], np.int8)) for i in _BUFFER_IDX.values()}
 _OFFSET0_BUF = pa.py_buffer(np.array([0], np.int32))
 _STRIP_T = rr.components.LineStrip2DBatch._ARROW_DATATYPE
+_POINT_T = rr.components.Position2DBatch._ARROW_DATATYPE
 
 
 @functools.lru_cache(maxsize=64)
@@ -151,16 +170,6 @@ def _strips_array(strips: list[np.ndarray]) -> pa.Array:
     offsets = np.zeros(len(strips) + 1, np.int32)
     offsets[1:] = np.cumsum([len(s) for s in strips])
     return pa.ListArray.from_arrays(pa.array(offsets), points, type=_STRIP_T)
-
-
-def _finite_runs(x: np.ndarray, y: np.ndarray) -> list[np.ndarray]:
-    """(n, 2) float32 strips of (x, y), split where y is not finite (a gap, not a zero)."""
-    ok = np.isfinite(y) & np.isfinite(x)
-    xy = np.column_stack([x, y]).astype(np.float32)
-    if ok.all():
-        return [xy]
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
-    return [xy[a:b] for a, b in zip(edges[::2], edges[1::2])]
 
 
 def _ns(t_s) -> np.ndarray:
@@ -302,46 +311,39 @@ class _WebViewerServer:
 # The view
 # --------------------------------------------------------------------------------------------
 
-def _grid_step(span: float, steps: Sequence[float]) -> float:
-    for s in steps:
-        if span / s <= 8:
-            return s
-    return steps[-1] * math.ceil(span / (8 * steps[-1]))
+def _rgba(c) -> int:
+    r, g, b = c[:3]
+    a = c[3] if len(c) > 3 else 255
+    return (int(r) << 24) | (int(g) << 16) | (int(b) << 8) | int(a)
 
 
-def _round_125(w: float, *, down: bool) -> float:
-    """log10 of the nearest 1-2-5 value (..., 0.5, 1, 2, 5, 10, ...) below (down) or above ``w``."""
-    d = math.floor(math.log10(w))
-    cands = [m * 10.0 ** e for e in (d - 1, d, d + 1) for m in (1, 2, 5)]
-    v = max(c for c in cands if c <= w * (1 + 1e-9)) if down else min(c for c in cands if c >= w * (1 - 1e-9))
-    return math.log10(v)
+class _Plot:
+    """One frequency plot of one pair (coherence, magnitude or phase): its path and what is on screen."""
 
+    __slots__ = ("path", "kind", "unit", "steps", "color", "box", "extent", "grid_key")
 
-def _ticks_125(x0: float, x1: float) -> list[tuple[float, bool]]:
-    """(log10 value, is a decade) of the 1-2-5 values in [10^x0, 10^x1]."""
-    out = []
-    for e in range(math.floor(x0) - 1, math.ceil(x1) + 1):
-        for m in (1, 2, 5):
-            x = e + math.log10(m)
-            if x0 - 1e-9 <= x <= x1 + 1e-9:
-                out.append((x, m == 1))
-    return out
+    def __init__(self, path: str, kind: str, unit: str, steps: Sequence[float], color: tuple, box: tuple) -> None:
+        self.path, self.kind, self.unit, self.steps, self.color, self.box = path, kind, unit, steps, color, box
+        self.extent: tuple | None = None     # (y0, y1, step) plotted
+        # box = (x, y, width, height) in the pair view's display units (blueprint.plot_box)
+        self.grid_key: tuple | None = None   # what the logged transform and grid were made for
 
 
 class _PairState:
     """What the view remembers about one output/input pair."""
 
-    __slots__ = ("coh_path", "mag_path", "phase_path", "wf_path", "grid_key", "waterfall", "wf_count",
-                 "mag_extent", "phase_extent")
+    __slots__ = ("coh", "mag", "phase", "wf_path", "waterfall", "wf_count")
 
-    def __init__(self, o: str, i: str) -> None:
-        self.coh_path, self.mag_path = coherence_path(o, i), magnitude_path(o, i)
-        self.phase_path, self.wf_path = phase_path(o, i), waterfall_path(o, i)
-        self.grid_key: bytes | None = None         # omega grid whose abscissa/widths were last logged
+    def __init__(self, o: str, i: str, n_inputs: int) -> None:
+        self.coh = _Plot(coherence_path(o, i), "coherence", "γ²", (0.2,), _COH_COLOR, plot_box("coherence", n_inputs))
+        self.mag = _Plot(magnitude_path(o, i), "magnitude", "dB", MAG_STEPS_DB, _MAG_COLOR,
+                         plot_box("magnitude", n_inputs))
+        self.phase = _Plot(phase_path(o, i), "phase", "deg", PHASE_STEPS_DEG, _PHASE_COLOR,
+                           plot_box("phase", n_inputs))
+        self.coh.extent = (0.0, 1.0, 0.2)
+        self.wf_path = waterfall_path(o, i)
         self.waterfall: np.ndarray | None = None   # (k, n_f) uint8, never mutated once logged
         self.wf_count = 0
-        self.mag_extent: tuple | None = None       # (x0, x1, y0, y1) of the logged grid
-        self.phase_extent: tuple | None = None
 
 
 class RerunView:
@@ -367,6 +369,8 @@ class RerunView:
         Re-log the waterfalls every k-th estimate (rows are still added on every estimate).
     flush_timeout_s : float
         Upper bound for :meth:`flush` (an unreachable gRPC sink must not hang shutdown).
+    test_point_history : int
+        Closed test points kept in the test-point document (the oldest drop out).
 
     With no sink at all the data goes to an in-memory recording, :attr:`memory`
     (``rr.MemoryRecording``; drain it or it grows).
@@ -375,7 +379,8 @@ class RerunView:
     def __init__(self, inputs: Sequence[str], outputs: Sequence[str], *, application_id: str = "livesweep",
                  recording_id: str | None = None, save_path: str | os.PathLike | None = None, spawn: bool = False,
                  serve: bool = False, bind_host: str = "127.0.0.1", grpc_port: int = 9876, web_port: int = 9090,
-                 waterfall_rows: int = 30, waterfall_every: int = 1, flush_timeout_s: float = 10.0) -> None:
+                 waterfall_rows: int = 30, waterfall_every: int = 1, flush_timeout_s: float = 10.0,
+                 test_point_history: int = 50) -> None:
         self.inputs, self.outputs = list(inputs), list(outputs)
         check_names(self.inputs, self.outputs)
         if spawn and serve:
@@ -385,6 +390,7 @@ class RerunView:
                              f"{waterfall_rows} and {waterfall_every}")
         self.waterfall_rows, self.waterfall_every = int(waterfall_rows), int(waterfall_every)
         self.flush_timeout_s = float(flush_timeout_s)
+        self.test_point_history = max(0, int(test_point_history))
         self.blueprint = default_blueprint(self.inputs, self.outputs)
         self.save_path = None if save_path is None else Path(save_path)
         self.web_url: str | None = None
@@ -393,9 +399,12 @@ class RerunView:
         self._server: _WebViewerServer | None = None
         self._lock = threading.RLock()
         self._closed = False
-        self._known_series: set[str] = set()
+        self._series_labels: dict[str, str] = {}
         self._pairs: dict[tuple[str, str], _PairState] = {}
         self._grid_cache: tuple[bytes, dict] | None = None
+        self._sweep_inputs: set[str] = set()
+        self._test_points: dict[tuple, tuple[int, dict]] = {}   # (start_s, swept_input) -> (number, record)
+        self._n_test_points = 0
 
         self.rec = rr.RecordingStream(application_id, recording_id=recording_id)
         self.rec.set_log_time_enabled(False)   # flight_time is the only timeline: replay == live
@@ -428,9 +437,13 @@ class RerunView:
 
         # Component descriptors for the fast path (building these archetypes also pays Rerun's
         # one-off lazy initialisation, ~100 ms, here instead of in the first estimate).
-        d = _descriptors(rr.BarChart([0.0], abscissa=[0.0], widths=[1.0]))
-        self._d_bar_values = d["BarChart:values"]
-        self._d_strips = _descriptors(rr.LineStrips2D([[[0.0, 0.0], [1.0, 1.0]]]))["LineStrips2D:strips"]
+        d = _descriptors(rr.LineStrips2D([[[0.0, 0.0], [1.0, 1.0]]], colors=[[1, 2, 3]], radii=[1.0]))
+        self._d_strips, self._d_strip_colors, self._d_strip_radii = (
+            d["LineStrips2D:strips"], d["LineStrips2D:colors"], d["LineStrips2D:radii"])
+        d = _descriptors(rr.Points2D([[0.0, 0.0]], colors=[[1, 2, 3]]))
+        self._d_points, self._d_point_colors = d["Points2D:positions"], d["Points2D:colors"]
+        d = _descriptors(rr.DynamicArchetype("Coherence", components={"values": np.zeros(1), "kind": "ordinary"}))
+        self._d_coh_values, self._d_coh_kind = d["Coherence:values"], d["Coherence:kind"]
         self._d_tensor = _descriptors(rr.Tensor(np.zeros((1, 1), np.uint8)))["Tensor:data"]
         self._d_scalars = _descriptors(rr.Scalars([0.0]))["Scalars:scalars"]
 
@@ -452,89 +465,103 @@ class RerunView:
         if self._closed:
             raise RuntimeError("RerunView is closed")
 
-    def _ensure_series(self, path: str, name: str) -> None:
-        if path not in self._known_series:
-            self.rec.log(path, rr.SeriesLines(names=name), static=True)
-            self._known_series.add(path)
+    def _ensure_series(self, path: str, label: str) -> None:
+        """The series' name in the legend (static), logged again only when it changes."""
+        if self._series_labels.get(path) != label:
+            self.rec.log(path, rr.SeriesLines(names=label), static=True)
+            self._series_labels[path] = label
 
     def _pair(self, o: str, i: str) -> _PairState:
         st = self._pairs.get((o, i))
         if st is None:
-            st = self._pairs[(o, i)] = _PairState(o, i)
-            for path, (sx, sy), color in ((st.mag_path, MAG_DISPLAY_SCALE, _MAG_COLOR),
-                                          (st.phase_path, PHASE_DISPLAY_SCALE, _PHASE_COLOR)):
-                self.rec.log(path, rr.Transform3D(scale=[sx, -sy, 1.0]), static=True)
-                self.rec.log(path, rr.LineStrips2D.from_fields(colors=[color], radii=rr.Radius.ui_points(1.5),
-                                                               draw_order=20.0), static=True)
+            st = self._pairs[(o, i)] = _PairState(o, i, len(self.inputs))
+            for p in (st.coh, st.mag, st.phase):
+                self.rec.log(p.path, rr.LineStrips2D.from_fields(draw_order=20.0), static=True)
+            self.rec.log(st.coh.path, rr.Points2D.from_fields(radii=rr.Radius.ui_points(2.0), draw_order=21.0),
+                         static=True)
             if self.waterfall_rows:
                 self.rec.log(st.wf_path, rr.Tensor.from_fields(value_range=(0.0, 100.0)), static=True)
         return st
 
     def _grid_batches(self, omega: np.ndarray) -> dict:
-        """Per-frequency-grid arrays, built once and shared by every pair and update."""
+        """Per-frequency-grid values, built once and shared by every pair and update."""
         key = omega.tobytes()
         if self._grid_cache is not None and self._grid_cache[0] == key:
             return self._grid_cache[1]
-        widths = (0.9 * np.gradient(omega)) if omega.size > 1 else np.ones(1)
-        bar = rr.BarChart(np.zeros(omega.size), abscissa=omega, widths=widths.astype(np.float32))
+        x0, x1 = frequency_extent(omega)
         g = {
             "key": key,
-            "bar": [b for b in bar.as_component_batches()
-                    if b.component_descriptor().component in ("BarChart:abscissa", "BarChart:widths")],
             "logw": np.log10(omega),
-            "x_lo": _round_125(float(omega.min()), down=True), "x_hi": _round_125(float(omega.max()), down=False),
+            "x": (x0, x1),
             "dims": ("estimate (newest last)",
                      f"frequency bin (0: {omega[0]:.3g} ... {omega.size - 1}: {omega[-1]:.3g} rad/s)"),
         }
         self._grid_cache = (key, g)
         return g
 
-    def _log_grid(self, path: str, extent_old: tuple | None, g: dict, y_min: float, y_max: float, unit: str,
-                  steps: Sequence[float]) -> tuple | None:
-        """Static grid + labels under ``path``; re-logged only when the plotted range grows.
+    def _log_frame(self, plot: _Plot, x_range: tuple[float, float], label: str) -> None:
+        """The plot's display transform and grid, logged at the current time when they change.
 
-        x spans the 1-2-5 values around the frequency grid (lines at 1, 2, 5 x 10^k rad/s), y the
-        multiples of a step (5/10/20 dB, 15/30/45/90 deg) around the data. Frequency labels sit on
-        the bottom line, value labels left of the left line (none at the shared corner).
+        The transform maps the data box [x0, x1] x [y0, y1] (log10 rad/s, value) onto the plot box
+        (:func:`plot_box`, y down); the grid (a child entity, so under the same transform) has a
+        line at every 1-2-5 frequency and every value step, frequency labels under the box,
+        value labels left of it and the axis name above them.
         """
-        if not (math.isfinite(y_min) and math.isfinite(y_max)):
-            return extent_old
-        x0, x1 = g["x_lo"], g["x_hi"]
-        y0, y1 = y_min, y_max
-        if extent_old is not None:
-            if x0 >= extent_old[0] and x1 <= extent_old[1] and y0 >= extent_old[2] and y1 <= extent_old[3]:
-                return extent_old   # the common case: nothing to do
-            x0, x1 = min(x0, extent_old[0]), max(x1, extent_old[1])
-            y0, y1 = min(y0, extent_old[2]), max(y1, extent_old[3])
-        step = _grid_step(max(y1 - y0, 1e-9), steps)
-        y0, y1 = step * math.floor(y0 / step), step * math.ceil(y1 / step)
-        if y1 <= y0:
-            y1 = y0 + step
-        ext = (x0, x1, y0, y1)
-        if ext == extent_old:
-            return ext
+        y0, y1, step = plot.extent
+        key = (x_range, plot.extent, label)
+        if key == plot.grid_key:
+            return
+        plot.grid_key = key
+        x0, x1 = x_range
+        bx, by, w, h = plot.box
+        sx, sy = w / (x1 - x0), h / (y1 - y0)
+        self.rec.log(plot.path, rr.Transform3D(translation=[bx - x0 * sx, by + y1 * sy, 0.0], scale=[sx, -sy, 1.0]))
+        left, _, top, bottom = plot_margins(len(self.inputs))
+        below, beside, above = y0 - 0.4 * bottom / sy, x0 - 0.5 * left / sx, y1 + 0.6 * top / sy
         major, minor, pts, labels = [], [], [], []
-        ticks = _ticks_125(x0, x1)
+        ticks = log_ticks(x0, x1)
         for k, (x, is_decade) in enumerate(ticks):
             (major if is_decade else minor).append([[x, y0], [x, y1]])
-            if is_decade or k in (0, len(ticks) - 1):
-                pts.append([x, y0 - 0.5 * step])
-                labels.append(f"{10.0 ** x:.3g}" + (" rad/s" if k == len(ticks) - 1 else ""))
+            pts.append([x, below])
+            labels.append(tick_label(10.0 ** x) + (" rad/s" if k == len(ticks) - 1 else ""))
         n = int(round((y1 - y0) / step))
         for k in range(n + 1):
             yy = y0 + k * step
-            major.append([[x0, yy], [x1, yy]])
-            if k > 0:
-                pts.append([x0 - 0.12 * (x1 - x0), yy])
-                labels.append(f"{yy:g} {unit}")
-        self.rec.log(f"{path}/grid",
+            (major if k in (0, n) or plot.kind != "coherence" else minor).append([[x0, yy], [x1, yy]])
+            pts.append([beside, yy])
+            labels.append(tick_label(yy))
+        pts.append([beside, above])
+        labels.append(label)
+        self.rec.log(f"{plot.path}/grid",
                      rr.LineStrips2D(major + minor,
                                      colors=[_GRID_COLOR] * len(major) + [_GRID_MINOR_COLOR] * len(minor),
                                      radii=rr.Radius.ui_points(0.5), draw_order=5.0),
-                     rr.Points2D(pts, labels=labels, show_labels=True, radii=rr.Radius.ui_points(1.0),
-                                 colors=[_GRID_COLOR], draw_order=6.0),
-                     static=True)
-        return ext
+                     rr.Points2D(pts, labels=labels, show_labels=True, radii=rr.Radius.ui_points(0.5),
+                                 colors=[_GRID_COLOR], draw_order=6.0))
+        if plot.kind == "coherence":
+            self.rec.log(f"{plot.path}/threshold",
+                         rr.LineStrips2D([[[x0, MIN_COHERENCE], [x1, MIN_COHERENCE]]], colors=[_THRESHOLD_COLOR],
+                                         radii=rr.Radius.ui_points(1.0), labels=[f"γ² = {MIN_COHERENCE:g}"],
+                                         show_labels=False, draw_order=15.0))
+
+    def _log_curve(self, plot: _Plot, logw: np.ndarray, y: np.ndarray, coherent: np.ndarray,
+                   extra: list | None = None) -> None:
+        """One curve: coherent stretches in the plot's colour, masked ones grey and thin (see
+        :func:`masked_runs`; a masked point outside the plotted range is not drawn)."""
+        y0, y1, _ = plot.extent
+        runs = masked_runs(y, coherent, (y0, y1))
+        xy = np.empty((y.size, 2), np.float32)
+        xy[:, 0] = logw
+        xy[:, 1] = y
+        strips = [xy[a:b] for a, b, _ in runs]
+        good = np.array([ok for _, _, ok in runs], bool)
+        colors = np.where(good, _rgba(plot.color), _rgba(_MASKED_COLOR)).astype(np.uint32)
+        radii = np.where(good, _CURVE_RADIUS, _MASKED_RADIUS).astype(np.float32)
+        DCB = rr.DescribedComponentBatch
+        batches = [DCB(_Arrow(_strips_array(strips)), self._d_strips),
+                   DCB(_Arrow(pa.array(colors)), self._d_strip_colors),
+                   DCB(_Arrow(pa.array(radii)), self._d_strip_radii)]
+        self.rec.log(plot.path, batches + (extra or []))
 
     def _set_time(self, t_s: float) -> None:
         t = float(t_s)
@@ -545,38 +572,81 @@ class RerunView:
     # ---------------------------------------------------------------- public API
 
     def log_timeseries(self, t_s: np.ndarray, names: Sequence[str], values: np.ndarray,
-                       kinds: Sequence[str]) -> None:
-        """One block of samples: ``values[k]`` is signal ``names[k]`` (kind "input"/"output") at ``t_s``."""
+                       kinds: Sequence[str], units: Sequence[str | None] | None = None) -> None:
+        """One block of samples: ``values[k]`` is signal ``names[k]`` at the flight times ``t_s`` [s].
+
+        Parameters
+        ----------
+        t_s : array (n,)
+            Flight time [s], finite.
+        names : sequence of str
+        values : array (len(names), n)
+            Samples in each signal's own unit.
+        kinds : sequence of str
+            ``"input"`` or ``"output"`` per name.
+        units : sequence of str or None, optional
+            Unit per name (``"deg"``, ``"deg/s"``, ``"ft/s^2"``); the series is named
+            ``"<name> [<unit>]"`` in the legend. None (or an empty unit): the bare name.
+        """
         with self._lock:
             self._check_open()
             t = np.asarray(t_s, dtype=np.float64)
             v = np.array(values, dtype=np.float64, copy=True)   # private copy: pyarrow wraps it
             names, kinds = list(names), list(kinds)
+            units = [None] * len(names) if units is None else list(units)
             if v.ndim == 1 and len(names) == 1:
                 v = v[None, :]
             if t.ndim != 1:
                 raise ValueError(f"t_s must be 1-D, got shape {t.shape}")
-            if len(kinds) != len(names) or v.shape != (len(names), t.size):
+            if len(kinds) != len(names) or len(units) != len(names) or v.shape != (len(names), t.size):
                 raise ValueError(f"values must have shape (len(names), len(t_s)) = ({len(names)}, {t.size}) with one "
-                                 f"kind per name; got values {v.shape}, {len(names)} names, {len(kinds)} kinds")
+                                 f"kind and one unit per name; got values {v.shape}, {len(names)} names, "
+                                 f"{len(kinds)} kinds, {len(units)} units")
+            paths = [telemetry_path(kind, name) for name, kind in zip(names, kinds)]
+            for path, name, unit in zip(paths, names, units):
+                self._ensure_series(path, series_label(name, unit))
             if t.size == 0:
                 return
             if not np.all(np.isfinite(t)):
                 bad = int(np.flatnonzero(~np.isfinite(t))[0])
                 raise ValueError(f"t_s[{bad}] = {t[bad]!r} is not a finite flight time")
             times = rr.TimeColumn(TIMELINE, duration=_ns(t).astype("timedelta64[ns]"))
-            for name, kind, row in zip(names, kinds, v):
-                path = telemetry_path(kind, name)
-                self._ensure_series(path, name)
+            for path, row in zip(paths, v):
                 col = rr.ComponentColumn(self._d_scalars, _Arrow(pa.array(row)))
                 self.rec.send_columns(path, indexes=[times], columns=[col])
 
     def log_estimate(self, t_s: float, omega: np.ndarray, outputs: Sequence[str], inputs: Sequence[str],
                      coherence: np.ndarray, magnitude_db: np.ndarray, phase_deg: np.ndarray,
-                     adequacy_rows: Sequence[dict], verdict: str, reasons: Sequence[str]) -> None:
-        """One spectral estimate at flight time ``t_s``; arrays are (n_out, n_in, n_f) over ``omega`` [rad/s]."""
+                     adequacy_rows: Sequence[dict], verdict: str, reasons: Sequence[str], *,
+                     coherence_kind: str = "ordinary", sweep: dict | None = None) -> None:
+        """One spectral estimate at flight time ``t_s`` [s].
+
+        Parameters
+        ----------
+        t_s : float
+            Flight time of the estimate [s].
+        omega : array (n_f,)
+            Frequency grid [rad/s], > 0.
+        outputs, inputs : sequence of str
+        coherence, magnitude_db, phase_deg : arrays (n_out, n_in, n_f)
+            gamma^2 (the one the verdict judged), |H| [dB] and phase [deg]. The phase is drawn
+            unwrapped along frequency and moved by whole turns so its value at the lowest
+            coherent frequency lies in (-180, 180] (:func:`reference_phase`).
+        adequacy_rows : sequence of dict
+            ``{"output", "input", "band": (lo, hi) [rad/s] or None, "fraction": 0..1}`` per pair.
+        verdict : str
+        reasons : sequence of str
+        coherence_kind : str
+            ``"ordinary"`` or ``"partial"`` (MISO-conditioned): which coherence ``coherence`` is;
+            shown in each coherence plot and in the status text.
+        sweep : dict, optional
+            ``{input: (omega [rad/s] or None, time remaining [s] or None)}``: the sweep frequency
+            and the sweep time still needed to reach the band's top, logged as scalars (NaN when
+            None) and written in the status text.
+        """
         with self._lock:
             self._check_open()
+            coherence_kind_text(coherence_kind)      # ValueError for anything but ordinary/partial
             outputs, inputs = list(outputs), list(inputs)
             w = np.array(omega, dtype=np.float64, copy=True).ravel()
             if w.size == 0 or not np.all(np.isfinite(w)) or np.any(w <= 0):
@@ -586,53 +656,48 @@ class RerunView:
             for what, a in (("coherence", coherence), ("magnitude_db", magnitude_db), ("phase_deg", phase_deg)):
                 a = np.array(a, dtype=np.float64, copy=True)
                 if a.shape != shape:
-                    raise ValueError(f"{what} must have shape (n_outputs, n_inputs, n_freq) = {shape}, got {a.shape}")
+                    raise ValueError(f"{what} must have shape (n_outputs, n_inputs, n_f) = {shape}, got {a.shape}")
                 arrays.append(a)
             coh, mag, pha = arrays
+            sweep = {str(k): _sweep_pair(k, v) for k, v in (sweep or {}).items()}
             self._set_time(t_s)
             g = self._grid_batches(w)
-            logw = g["logw"]
-            # (n_out, n_in, n_f, 2) float32 point arrays for all Bode strips at once; each pair's
-            # strip wraps a contiguous view of these private arrays (no per-pair copies).
-            mag_xy = np.empty(shape + (2,), np.float32)
-            mag_xy[..., 0] = logw
-            mag_xy[..., 1] = mag
-            pha_xy = np.empty(shape + (2,), np.float32)
-            pha_xy[..., 0] = logw
-            pha_xy[..., 1] = pha
-            mag_fin, pha_fin = np.isfinite(mag), np.isfinite(pha)
-            mag_ok, pha_ok = mag_fin.all(axis=-1), pha_fin.all(axis=-1)
-            mag_lo = np.min(mag, axis=-1, initial=np.inf, where=mag_fin)
-            mag_hi = np.max(mag, axis=-1, initial=-np.inf, where=mag_fin)
-            pha_lo = np.min(pha, axis=-1, initial=np.inf, where=pha_fin)
-            pha_hi = np.max(pha, axis=-1, initial=-np.inf, where=pha_fin)
+            logw, x_range = g["logw"], g["x"]
+            coherent = np.isfinite(coh) & (coh >= MIN_COHERENCE)
+            pha = reference_phase(pha, coherent)
+            mag_rng = _data_range(mag, coherent)
+            pha_rng = _data_range(pha, coherent)
             wf_pct = None
             if self.waterfall_rows:
                 wf_pct = np.clip(np.rint(np.nan_to_num(coh, nan=0.0) * 100.0), 0, 100).astype(np.uint8)
             n_f = w.size
-            strip_offsets = _offsets(n_f)
             DCB = rr.DescribedComponentBatch
             rec = self.rec
+            kind_batch = DCB(_Arrow(pa.array([coherence_kind], pa.string())), self._d_coh_kind)
+            coh_label = "γ² " + coherence_kind
             for io, o in enumerate(outputs):
                 for ii, i in enumerate(inputs):
                     st = self._pair(o, i)
-                    batches = [DCB(_Arrow(_tensor_array(coh[io, ii])), self._d_bar_values)]
-                    if st.grid_key != g["key"]:   # abscissa/widths only when the grid changes (latest-at)
-                        batches += g["bar"]
-                        st.grid_key = g["key"]
-                    rec.log(st.coh_path, batches)
-                    for path, xy, ok, y in ((st.mag_path, mag_xy, mag_ok, mag), (st.phase_path, pha_xy, pha_ok, pha)):
-                        if ok[io, ii]:
-                            pts = pa.FixedSizeListArray.from_arrays(pa.array(xy[io, ii].ravel()),
-                                                                    type=_STRIP_T.value_type)
-                            strips = pa.ListArray.from_arrays(strip_offsets, pts, type=_STRIP_T)
-                        else:
-                            strips = _strips_array(_finite_runs(logw, y[io, ii]))
-                        rec.log(path, [DCB(_Arrow(strips), self._d_strips)])
-                    st.mag_extent = self._log_grid(st.mag_path, st.mag_extent, g, float(mag_lo[io, ii]),
-                                                   float(mag_hi[io, ii]), "dB", (5.0, 10.0, 20.0))
-                    st.phase_extent = self._log_grid(st.phase_path, st.phase_extent, g, float(pha_lo[io, ii]),
-                                                     float(pha_hi[io, ii]), "deg", (15.0, 30.0, 45.0, 90.0))
+                    ok = coherent[io, ii]
+                    # coherence: line + points, exact values and their kind alongside
+                    c = coh[io, ii]
+                    fin = np.isfinite(c)
+                    pos = np.empty((int(fin.sum()), 2), np.float32)
+                    pos[:, 0] = logw[fin]
+                    pos[:, 1] = c[fin]
+                    pcol = np.where(ok[fin], _rgba(_COH_COLOR), _rgba(_MASKED_COLOR)).astype(np.uint32)
+                    points = pa.FixedSizeListArray.from_arrays(pa.array(pos.ravel()), type=_POINT_T)
+                    self._log_frame(st.coh, x_range, coh_label)
+                    self._log_curve(st.coh, logw, c, ok, [
+                        DCB(_Arrow(points), self._d_points), DCB(_Arrow(pa.array(pcol)), self._d_point_colors),
+                        DCB(_Arrow(pa.array(c)), self._d_coh_values), kind_batch])
+                    for plot, y, rng, label in ((st.mag, mag, mag_rng, "|H| dB"), (st.phase, pha, pha_rng, "phase deg")):
+                        lo, hi = rng[0][io, ii], rng[1][io, ii]
+                        plot.extent = value_extent(plot.extent, float(lo), float(hi), plot.steps)
+                        if plot.extent is None:
+                            continue      # nothing finite yet: nothing to draw
+                        self._log_frame(plot, x_range, label)
+                        self._log_curve(plot, logw, y[io, ii], ok)
                     if wf_pct is not None:
                         row = wf_pct[io, ii][None, :]
                         old = st.waterfall
@@ -653,8 +718,55 @@ class RerunView:
                     if k is not None and r.get("fraction") is not None:
                         frac[k] = float(r["fraction"])
                 rec.log(FRACTION_PATH, rr.Scalars(frac))
-            rec.log(ADEQUACY_PATH, rr.TextDocument(adequacy_markdown(t_s, adequacy_rows, verdict, reasons),
-                                                   media_type=rr.MediaType.MARKDOWN))
+            for name, (f_rad_s, remaining_s) in sweep.items():
+                if name not in self._sweep_inputs:
+                    self._sweep_inputs.add(name)
+                    rec.log(sweep_frequency_path(name), rr.SeriesLines(names=f"{name} [rad/s]"), static=True)
+                    rec.log(time_remaining_path(name), rr.SeriesLines(names=f"{name} [s]"), static=True)
+                rec.log(sweep_frequency_path(name), rr.Scalars(np.nan if f_rad_s is None else f_rad_s))
+                rec.log(time_remaining_path(name), rr.Scalars(np.nan if remaining_s is None else remaining_s))
+            rec.log(ADEQUACY_PATH, rr.TextDocument(
+                adequacy_markdown(t_s, adequacy_rows, verdict, reasons, coherence_kind=coherence_kind, sweep=sweep),
+                media_type=rr.MediaType.MARKDOWN))
+
+    def log_test_point(self, t_s: float, tp: dict) -> None:
+        """A test point opened, was judged, or closed: the test-point document at flight time ``t_s`` [s].
+
+        Parameters
+        ----------
+        t_s : float
+            Flight time [s].
+        tp : dict
+            The monitor's ``/livesweep/test_point`` record: ``{"state": "open"|"closed", "start_s",
+            "end_s" (None while open), "source", "swept_input", "verdict", "pairs": [{"output",
+            "input", "adequate_fraction", "band_rad_s": [lo, hi] or None, "coherence":
+            "ordinary"|"partial"}], "missing": [str, ...]}``.
+
+        The document (``status/test_points``, markdown) lists the open test point first, then the
+        others newest first, each with its table (pair, coherence kind, adequate band, fraction,
+        verdict, what is still missing); a record with the same start and swept input replaces
+        the earlier one, so each test point appears once. At most ``test_point_history`` closed
+        ones are kept.
+        """
+        with self._lock:
+            self._check_open()
+            if not isinstance(tp, dict):
+                raise TypeError(f"tp must be a dict (the /livesweep/test_point record), got {type(tp).__name__}")
+            key = (tp.get("start_s"), tp.get("swept_input"))
+            if key in self._test_points:
+                number = self._test_points[key][0]
+            else:
+                self._n_test_points += 1
+                number = self._n_test_points
+            self._test_points[key] = (number, dict(tp))
+            closed = [k for k, (_, r) in self._test_points.items() if r.get("state") != "open"]
+            for k in closed[:max(0, len(closed) - self.test_point_history)]:
+                del self._test_points[k]
+            entries = sorted(self._test_points.values(),
+                             key=lambda e: (e[1].get("state") != "open", -e[0]))
+            self._set_time(t_s)
+            self.rec.log(TEST_POINTS_PATH, rr.TextDocument(markdown_test_points(entries, t_s),
+                                                           media_type=rr.MediaType.MARKDOWN))
 
     def log_alerts(self, t_s: float, alerts: Sequence[tuple[str, str]]) -> None:
         """Alerts as WARN text-log lines ``"[kind] message"`` at flight time ``t_s``."""
@@ -698,37 +810,28 @@ class RerunView:
         self.close()
 
 
-def _fmt_band(band) -> str:
-    if band is None:
-        return "—"
-    if isinstance(band, str):
-        return band or "—"
-    b = list(band)
-    if not b:
-        return "—"
-    if len(b) == 2 and all(isinstance(x, (int, float, np.floating, np.integer)) for x in b):
-        return f"{float(b[0]):.3g} – {float(b[1]):.3g}"
-    return ", ".join(_fmt_band(x) for x in b)
+def series_label(name: str, unit: str | None) -> str:
+    """A time series' legend name: ``"da [deg]"``, or the bare name without a unit."""
+    return f"{name} [{unit}]" if unit else str(name)
 
 
-def _md(s) -> str:
-    return str(s).replace("|", "\\|").replace("\n", " ")
+def _sweep_pair(name, v) -> tuple[float | None, float | None]:
+    try:
+        f, rem = v
+    except (TypeError, ValueError):
+        raise ValueError(f"sweep[{name!r}] must be (omega_rad_s or None, time_remaining_s or None), got {v!r}") from None
+    f = None if f is None or not math.isfinite(float(f)) else float(f)
+    rem = None if rem is None or not math.isfinite(float(rem)) else float(rem)
+    return f, rem
 
 
-def adequacy_markdown(t_s: float, rows: Sequence[dict], verdict: str, reasons: Sequence[str]) -> str:
-    """The adequacy table as markdown. A row's verdict is ``row["verdict"]`` when given, else
-    "adequate" when it has an adequate band and "not adequate" when it has none."""
-    lines = [f"**Verdict: {_md(verdict)}**  (flight time {float(t_s):.1f} s)", ""]
-    lines += [f"- {_md(r)}" for r in reasons]
-    if reasons:
-        lines.append("")
-    lines += ["| pair | adequate band [rad/s] | fraction | verdict |", "|---|---|---|---|"]
-    for r in rows:
-        band = r.get("band")
-        frac = r.get("fraction")
-        f = "—" if frac is None or not np.isfinite(float(frac)) else f"{100.0 * float(frac):.0f} %"
-        has_band = _fmt_band(band) != "—"
-        v = r.get("verdict") or ("adequate" if has_band else "not adequate")
-        lines.append(f"| {_md(pair_label(r.get('output', '?'), r.get('input', '?')))} | {_md(_fmt_band(band))} | "
-                     f"{f} | {_md(v)} |")
-    return "\n".join(lines) + "\n"
+def _data_range(y: np.ndarray, coherent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per curve (last axis): the range of its coherent finite values, or of all its finite values
+    when fewer than two are coherent; +-inf where nothing is finite."""
+    fin = np.isfinite(y)
+    use = fin & coherent
+    few = use.sum(axis=-1) < 2
+    use = np.where(few[..., None], fin, use)
+    lo = np.min(y, axis=-1, initial=np.inf, where=use)
+    hi = np.max(y, axis=-1, initial=-np.inf, where=use)
+    return lo, hi

@@ -250,7 +250,7 @@ def _tp_section(number: int, tp: dict, t_s: float) -> list[str]:
         n = sum(1 for m in missing if m.startswith(label + " ") or m.startswith(label + ":"))
         kinds.append(str(p.get("coherence") or "ordinary"))
         rows.append([label, band_text(p.get("band_rad_s")), percent(frac, required), verdict,
-                     f"{n} item(s) below" if n else "—"])
+                     f"{n} below" if n else "—"])
     if kinds:
         kind = kinds[0] if len(set(kinds)) == 1 else None
         head += f"; coherence judged: {kind} γ²" if kind else ""
