@@ -3,8 +3,14 @@
 A *case file* names the records to identify from (``[[identify]]``, concatenated in order), the
 records to verify against (``[[verify]]``), where each signal lives in the logs (``[signals]``),
 the spectral settings (``[spectral]``) and, for later stages, the models (``[transfer_functions]``,
-``[state_space]``, ...). A *channel map* is a file with only ``[signals]`` and an optional
-``[spectral]`` table (what the live monitor needs).
+``[state_space]``, ...). A *channel map* is a file with ``[signals]``, an optional ``[spectral]``
+table (what the live monitor needs) and, for a named map (:mod:`livesweep.maps`), ``[map]``
+(``name``, ``description``, ``needs``) and ``[test_points]`` (:class:`TestPointSettings`).
+
+A signal's ``field`` is a field name or path, or arithmetic of them
+(:func:`livesweep.telemetry.extract.parse_field`); ``sysid``, ``compid`` and ``where`` select the
+messages it is taken from. On a ``/mavlink/<MSG>`` topic every field a signal names (operands,
+stamp, selection) is checked against the MAVLink definition of ``MSG`` when the file is loaded.
 
 Every problem raises :class:`~livesweep.errors.ConfigError` with a one-line message that names
 the file, the key path (``signals.p.scale``, ``identify[1].start_s``; array indices count from 0)
@@ -24,7 +30,7 @@ import os
 import re
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +40,10 @@ from livesweep.errors import ConfigError, quote
 __all__ = [
     "SignalSpec",
     "RecordSpec",
+    "TestPointSettings",
+    "ChannelMap",
+    "read_channel_map",
+    "TEST_POINT_SOURCES",
     "SpectralSettings",
     "Case",
     "load_case",
@@ -50,7 +60,15 @@ CASE_KEYS = ("case", "identify", "verify", "signals", "spectral") + RAW_TABLE_KE
 
 _CASE_TABLE_KEYS = ("name", "aircraft", "condition")
 _RECORD_KEYS = ("log", "label", "start_s", "end_s")
-_SIGNAL_KEYS = ("topic", "field", "stamp", "stamp_scale", "scale", "offset", "units")
+_SIGNAL_KEYS = ("topic", "field", "stamp", "stamp_scale", "scale", "offset", "units", "sysid", "compid", "where")
+#: Top-level tables of a channel map (a case file's keys are accepted too: ``--case`` takes one).
+MAP_KEYS = ("map", "signals", "spectral", "test_points")
+_MAP_TABLE_KEYS = ("name", "description", "needs")
+_TEST_POINT_KEYS = ("sources", "axes", "required", "min_duration_s")
+#: Where test points may come from (:mod:`livesweep.monitor.testpoints`).
+TEST_POINT_SOURCES = ("autopilot", "marker", "sweep")
+_DEFAULT_MIN_TEST_POINT_S = 10.0
+_MAX_VEHICLE_ID = 255           # MAVLink system and component ids are one byte
 _SPECTRAL_KEYS = ("inputs", "outputs", "band_rad_s", "sample_rate_hz", "windows_s", "overlap", "n_freq",
                   "references")
 _MAX_OVERLAP = 0.95
@@ -74,16 +92,25 @@ class SignalSpec:
     topic : str
         MCAP channel topic, e.g. ``"/mavlink/HIGHRES_IMU"``.
     field : str
-        Field of the JSON message (exact key or dotted path, ``"gyro.x"``, ``"servo.0"``).
+        Field of the JSON message (exact key or dotted path, ``"gyro.x"``, ``"servo.0"``), or an
+        arithmetic expression of such fields (``"servo2_raw - servo1_raw"``,
+        :func:`livesweep.telemetry.extract.parse_field`).
     stamp : str or None
         Field holding the vehicle time of the sample; None to use the MCAP ``log_time``
         (receive time, ns).
     stamp_scale : float
         Seconds per stamp unit (``1e-6`` for ``time_usec``). 1.0 when ``stamp`` is None.
     scale, offset : float
-        ``value = scale * raw + offset`` in ``units``.
+        ``value = scale * raw + offset`` in ``units`` (``raw``: the field, or the expression's value).
     units : str
         Units of the scaled value (free text, e.g. ``"deg/s"``).
+    sysid, compid : int or None
+        Take only messages of this MAVLink system / component (their ``sysid`` / ``compid``
+        fields); None: any (the live aligner then follows the first vehicle it sees).
+    where : tuple of (str, number)
+        Take only messages whose field equals the value, every pair at once (``(("axis", 1),)``
+        for the roll axis of MAVLink PID_TUNING, ``(("I", 0),)`` for a DataFlash instance). A
+        mapping or a list of pairs is accepted and stored as a tuple of pairs.
     """
 
     name: str
@@ -94,6 +121,16 @@ class SignalSpec:
     scale: float = 1.0
     offset: float = 0.0
     units: str = ""
+    sysid: int | None = None
+    compid: int | None = None
+    where: tuple = ()
+
+    def __post_init__(self) -> None:
+        w = self.where
+        pairs = tuple(w.items()) if isinstance(w, Mapping) else tuple(tuple(p) for p in (w or ()))
+        if any(len(p) != 2 for p in pairs):
+            raise TypeError(f"signal {self.name!r}: where must be field -> value pairs, got {w!r}")
+        object.__setattr__(self, "where", pairs)
 
 
 @dataclass(frozen=True)
@@ -149,6 +186,64 @@ class SpectralSettings:
     overlap: float = 0.8
     n_freq: int = 150
     references: tuple[str, ...] | None = None
+
+
+@dataclass(frozen=True)
+class TestPointSettings:
+    """A channel map's ``[test_points]`` table: where test points come from and what each must cover.
+
+    Attributes
+    ----------
+    sources : tuple of str
+        Evidence that opens and closes a test point, any of ``"autopilot"`` (ArduPilot SystemID),
+        ``"marker"`` (the operator) and ``"sweep"`` (detected oscillation); default all three.
+    axes : dict of int -> str
+        ArduPilot ``SID_AXIS`` number -> the input that axis sweeps (1/2/3 input roll/pitch/yaw,
+        4/5/6 recovery, 7/8/9 rate, 10/11/12 mixer, 13 mixer thrust); empty by default.
+    required : dict of str -> tuple of str
+        For every input of ``[spectral]``: the outputs whose pairs must be adequate when it is
+        swept. An input the table does not name gets the output at its own list position (or
+        every output when there are fewer outputs than that).
+    min_duration_s : float
+        A detected sweep shorter than this is no test point [s]; default 10.
+    """
+
+    __test__ = False                  # not a pytest class, whatever its name says
+
+    sources: tuple[str, ...] = TEST_POINT_SOURCES
+    axes: dict = field(default_factory=dict)
+    required: dict = field(default_factory=dict)
+    min_duration_s: float = _DEFAULT_MIN_TEST_POINT_S
+
+
+@dataclass(frozen=True)
+class ChannelMap:
+    """A validated channel map (a named preset or a file).
+
+    Attributes
+    ----------
+    name : str
+        ``[map].name`` (a preset's name); the file name without ``.toml`` when absent.
+    description, needs : str
+        ``[map].description`` and ``[map].needs`` (what telemetry, rates and parameters it needs);
+        empty when absent.
+    path : pathlib.Path
+        The file (resolved).
+    signals : dict[str, SignalSpec]
+        ``[signals]``, in file order.
+    spectral : SpectralSettings or None
+        ``[spectral]``; None when absent.
+    test_points : TestPointSettings or None
+        ``[test_points]`` with its defaults filled in; None when the table is absent.
+    """
+
+    name: str
+    description: str
+    needs: str
+    path: Path
+    signals: dict[str, SignalSpec]
+    spectral: SpectralSettings | None
+    test_points: TestPointSettings | None
 
 
 @dataclass(frozen=True)
@@ -288,16 +383,84 @@ def _parse_signal(ctx: _Ctx, name: str, raw: Any) -> SignalSpec:
     scale = _number(ctx, t.get("scale", 1.0), f"{where}.scale")
     if scale == 0.0:
         raise ctx.error(f"{where}.scale", "must not be 0 (the signal would be constant)", t["scale"])
+    from livesweep.telemetry.extract import is_field_path, parse_field
+
+    topic = _string(ctx, t["topic"], f"{where}.topic")
+    text = _string(ctx, t["field"], f"{where}.field")
+    expression = parse_field(text, f"{ctx.path}: {where}.field")
+    if stamp is not None and not is_field_path(stamp):
+        raise ctx.error(f"{where}.stamp", "must be one field name or dotted path (no arithmetic)", stamp)
+    selection = _parse_where(ctx, t["where"], f"{where}.where") if "where" in t else ()
+    ids = {k: _vehicle_id(ctx, t[k], f"{where}.{k}") for k in ("sysid", "compid") if k in t}
+    if topic.startswith("/mavlink/"):
+        named = [(f"{where}.field", f) for f in expression.operands]
+        named += [(f"{where}.stamp", stamp)] if stamp is not None else []
+        named += [(f"{where}.where.{k}", k) for k, _ in selection]
+        _check_mavlink_fields(ctx, where, topic, named)
     return SignalSpec(
         name=name,
-        topic=_string(ctx, t["topic"], f"{where}.topic"),
-        field=_string(ctx, t["field"], f"{where}.field"),
+        topic=topic,
+        field=text,
         stamp=stamp,
         stamp_scale=_positive(ctx, t["stamp_scale"], f"{where}.stamp_scale") if "stamp_scale" in t else 1.0,
         scale=scale,
         offset=_number(ctx, t.get("offset", 0.0), f"{where}.offset"),
         units=_string(ctx, t["units"], f"{where}.units", nonempty=False) if "units" in t else "",
+        sysid=ids.get("sysid"),
+        compid=ids.get("compid"),
+        where=selection,
     )
+
+
+def _vehicle_id(ctx: _Ctx, value: Any, key: str) -> int:
+    """A MAVLink system or component id: an integer from 0 to 255."""
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= _MAX_VEHICLE_ID:
+        raise ctx.error(key, f"must be an integer from 0 to {_MAX_VEHICLE_ID} (a MAVLink id)", value)
+    return value
+
+
+def _parse_where(ctx: _Ctx, raw: Any, key: str) -> tuple[tuple[str, int | float], ...]:
+    """``where = { field = value, ... }``: field names or paths -> finite numbers."""
+    from livesweep.telemetry.extract import is_field_path
+
+    t = _table(ctx, raw, key)
+    if not t:
+        raise ctx.error(key, "must name at least one field = value (or leave 'where' out)", raw)
+    out = []
+    for f, v in t.items():
+        if not is_field_path(f):
+            raise ctx.error(f"{key}.{quote(f)}", "a 'where' key is one field name or dotted path", f)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ctx.error(f"{key}.{f}", "must be a finite number (messages whose field equals it are taken)", v)
+        out.append((f, v))
+    return tuple(out)
+
+
+def _check_mavlink_fields(ctx: _Ctx, where: str, topic: str, named: list[tuple[str, str]]) -> None:
+    """Every field a signal on ``/mavlink/<MSG>`` names must be a field of that MAVLink message
+    (``sysid``, ``compid`` or a field of the dialect's definition; an array element as
+    ``name.index`` with the index in range)."""
+    from livesweep.telemetry.mavlink_codec import DIALECT, message_class
+
+    msg = topic.split("/", 2)[2]
+    try:
+        cls = message_class(msg)
+    except ConfigError as e:
+        raise ctx.error(f"{where}.topic", f"{e} (a /mavlink/ topic is /mavlink/<MESSAGE NAME>)", topic) from None
+    lengths = {"sysid": 0, "compid": 0}
+    for i, n in enumerate(cls.fieldnames):
+        lengths[n] = 0 if cls.fieldtypes[i] == "char" else int(cls.array_lengths[cls.orders[i]])
+    for key, path in named:
+        base, _, rest = path.partition(".")
+        n = lengths.get(base)
+        if n is None:
+            raise ctx.error(key, f"{base!r} is not a field of MAVLink {msg} in dialect {DIALECT} (fields: "
+                            f"{', '.join(lengths)})", path)
+        if n and not (rest.isdigit() and int(rest) < n):
+            raise ctx.error(key, f"{base!r} of MAVLink {msg} is an array of {n}: name one element, "
+                            f"{base}.0 to {base}.{n - 1}", path)
+        if not n and rest:
+            raise ctx.error(key, f"{base!r} of MAVLink {msg} is a single value, not an array or object", path)
 
 
 def _parse_signals(ctx: _Ctx, raw: Any) -> dict[str, SignalSpec]:
@@ -394,6 +557,70 @@ def _parse_spectral(ctx: _Ctx, raw: Any, signals: Mapping[str, SignalSpec]) -> S
                                 "exogenous injection, a signal of its own", n)
     return SpectralSettings(inputs=inputs, outputs=outputs, band_rad_s=(lo, hi), sample_rate_hz=fs,
                             windows_s=windows, overlap=overlap, n_freq=n_freq, references=references)
+
+
+def _parse_test_points(ctx: _Ctx, raw: Any, spectral: SpectralSettings | None) -> TestPointSettings:
+    """``[test_points]``: sources, axes, required, min_duration_s (every name a declared input or output)."""
+    t = _table(ctx, raw, "test_points")
+    _check_keys(ctx, t, _TEST_POINT_KEYS, "test_points")
+    if spectral is None:
+        raise ctx.error("test_points", "needs a [spectral] table: its names are spectral inputs and outputs")
+    inputs, outputs = spectral.inputs, spectral.outputs
+    sources = TEST_POINT_SOURCES
+    if "sources" in t:
+        sources = _string_list(ctx, t["sources"], "test_points.sources")
+        for i, v in enumerate(sources):
+            if v not in TEST_POINT_SOURCES:
+                raise ctx.error(f"test_points.sources[{i}]", f"must be one of {', '.join(TEST_POINT_SOURCES)}", v)
+    axes: dict[int, str] = {}
+    for k, v in _table(ctx, t.get("axes", {}), "test_points.axes").items():
+        key = f"test_points.axes.{quote(k)}"
+        if not (k.isascii() and k.isdigit()) or not 1 <= int(k) <= _MAX_VEHICLE_ID:
+            raise ctx.error(key, "a key is an ArduPilot SID_AXIS number, \"1\" to \"255\" (1/2/3 input roll/pitch/yaw, "
+                            "4-6 recovery, 7-9 rate, 10-12 mixer)", k)
+        if not isinstance(v, str) or v not in inputs:
+            raise ctx.error(key, f"must name a spectral input ({', '.join(inputs)})", v)
+        axes[int(k)] = v
+    required: dict[str, tuple[str, ...]] = {}
+    named = _table(ctx, t.get("required", {}), "test_points.required")
+    for k, v in named.items():
+        key = f"test_points.required.{quote(k)}"
+        if k not in inputs:
+            raise ctx.error(key, f"names no spectral input ({', '.join(inputs)})", k)
+        outs = _string_list(ctx, v, key)
+        for i, o in enumerate(outs):
+            if o not in outputs:
+                raise ctx.error(f"{key}[{i}]", f"names no spectral output ({', '.join(outputs)})", o)
+        required[k] = outs
+    for k, name in enumerate(inputs):            # the default: the on-axis output
+        if name not in required:
+            required[name] = (outputs[k],) if k < len(outputs) else tuple(outputs)
+    required = {name: required[name] for name in inputs}
+    min_s = _number(ctx, t.get("min_duration_s", _DEFAULT_MIN_TEST_POINT_S), "test_points.min_duration_s")
+    if min_s < 0:
+        raise ctx.error("test_points.min_duration_s", "must be >= 0 s", t["min_duration_s"])
+    return TestPointSettings(sources=sources, axes=axes, required=required, min_duration_s=min_s)
+
+
+def _parse_map_table(ctx: _Ctx, raw: Any) -> dict[str, str]:
+    """``[map]``: name, description, needs (strings)."""
+    t = _table(ctx, raw, "map")
+    _check_keys(ctx, t, _MAP_TABLE_KEYS, "map")
+    out = {k: _string(ctx, t[k], f"map.{k}", nonempty=(k == "name")) for k in _MAP_TABLE_KEYS if k in t}
+    if "name" in out and (len(out["name"]) > limits.MAX_NAME_CHARS or not _SIGNAL_NAME.fullmatch(out["name"])):
+        raise ctx.error("map.name", "a map name holds letters, digits, '_', and '.' or '-' between them "
+                        f"(at most {limits.MAX_NAME_CHARS} characters)", out["name"])
+    return out
+
+
+def _one_clock(ctx: _Ctx, signals: Mapping[str, SignalSpec]) -> None:
+    """Every signal of a map is timed by a vehicle stamp, or none is: the live aligner puts them on
+    one clock, and receive time and vehicle time are not comparable."""
+    stamped = [n for n, s in signals.items() if s.stamp is not None]
+    if stamped and len(stamped) != len(signals):
+        rx = [n for n in signals if n not in stamped]
+        raise ctx.error("signals", f"{', '.join(stamped)} are timed by a vehicle stamp but {', '.join(rx)} by receive "
+                        "time (no 'stamp'); a map gives every signal a stamp field, or none, so they share one clock")
 
 
 def _parse_record(ctx: _Ctx, raw: Any, where: str, base: Path) -> RecordSpec:
@@ -510,9 +737,10 @@ def load_case(path: str | os.PathLike[str]) -> Case:
 def load_channel_map(path: str | os.PathLike[str]) -> tuple[dict[str, SignalSpec], SpectralSettings | None]:
     """Load the ``[signals]`` and optional ``[spectral]`` tables of a channel map.
 
-    A channel map holds only those two tables (``config/xv15_channels.toml``). A full case file
-    is accepted too, as the live monitor's ``--case`` takes one: its other tables must be known
-    case tables but are not validated here (its logs need not exist yet).
+    A channel map holds those two tables (``config/xv15_channels.toml``) and, for a named map,
+    ``[map]`` and ``[test_points]`` (validated too; :func:`read_channel_map` returns them). A full
+    case file is accepted too, as the live monitor's ``--case`` takes one: its other tables must be
+    known case tables but are not validated here (its logs need not exist yet).
 
     Parameters
     ----------
@@ -528,10 +756,47 @@ def load_channel_map(path: str | os.PathLike[str]) -> tuple[dict[str, SignalSpec
     ConfigError
         As :func:`load_case`, for the two tables read and for unknown top-level keys.
     """
+    m = read_channel_map(path, one_clock=False)
+    return m.signals, m.spectral
+
+
+def read_channel_map(path: str | os.PathLike[str], *, one_clock: bool = True) -> ChannelMap:
+    """Load and validate a channel map with its ``[map]`` and ``[test_points]`` tables.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The TOML file: ``[signals]`` (required), ``[spectral]``, ``[map]`` (``name``,
+        ``description``, ``needs``: strings), ``[test_points]`` (``sources``, ``axes``,
+        ``required``, ``min_duration_s``: :class:`TestPointSettings`). A case file's tables are
+        accepted too and not validated here.
+    one_clock : bool
+        Refuse a map that times some signals by a vehicle stamp and others by receive time.
+
+    Returns
+    -------
+    ChannelMap
+
+    Raises
+    ------
+    ConfigError
+        As :func:`load_case` for ``[signals]`` and ``[spectral]``; an unknown key in ``[map]`` or
+        ``[test_points]``; a test-point source not in ``autopilot``, ``marker``, ``sweep``; an axis
+        key that is not a whole number from 1 to 255; a name in ``axes`` or ``required`` that is
+        not a spectral input (keys) or output (values); ``[test_points]`` without ``[spectral]``;
+        ``min_duration_s`` < 0; mixed clocks (with ``one_clock``). The message names the file, the
+        key path and the value.
+    """
     ctx, data = _read_toml(path)
-    _check_keys(ctx, data, CASE_KEYS, "")
+    _check_keys(ctx, data, tuple(dict.fromkeys(MAP_KEYS + CASE_KEYS)), "")
     if "signals" not in data:
         raise ctx.error("signals", "missing: a channel map needs a [signals] table")
+    head = _parse_map_table(ctx, data["map"]) if "map" in data else {}
     signals = _parse_signals(ctx, data["signals"])
+    if one_clock:
+        _one_clock(ctx, signals)
     spectral = _parse_spectral(ctx, data["spectral"], signals) if "spectral" in data else None
-    return signals, spectral
+    test_points = _parse_test_points(ctx, data["test_points"], spectral) if "test_points" in data else None
+    return ChannelMap(name=head.get("name", ctx.path.stem), description=head.get("description", ""),
+                      needs=head.get("needs", ""), path=ctx.path, signals=signals, spectral=spectral,
+                      test_points=test_points)

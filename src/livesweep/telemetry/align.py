@@ -17,7 +17,15 @@
   system it sees on any mapped topic, and on each topic the first component of that system; frames
   of other systems and components are counted (``other_system``, ``other_component``) and left
   out (the recording keeps them all), so one vehicle's inputs are never paired with another's
-  outputs.
+  outputs. A signal that names its own ``sysid``/``compid`` takes the frames of that vehicle
+  instead (its stamps then have a clock of their own; ``other_system`` still counts the frames the
+  lock leaves out for the other signals); a topic whose signals all do so does not move the lock.
+* **One extraction.** What a frame gives each signal (its selection by ``sysid``, ``compid`` and
+  ``where``, the field or expression, ``scale`` and ``offset``) is decided by the signal's
+  :class:`~livesweep.telemetry.extract.SignalExtractor`, the same object the offline reader uses.
+  :attr:`GridAligner.signal_counts` counts, per signal, the samples taken and the frames that gave
+  none (``missing_field``, ``not_a_number``, ``filtered`` by the selection, ``other_vehicle``),
+  for :func:`~livesweep.telemetry.extract.diagnose`.
 * **Multi-rate alignment.** Each signal keeps its recent samples; grid samples ``t0 + k/fs`` are
   emitted once every signal has reached them, by linear interpolation between the bracketing
   samples. Where the bracketing samples are further apart than ``max(max_interp_gap_s, 1.5 x the
@@ -49,26 +57,14 @@ import numpy as np
 from livesweep.config import SignalSpec
 from livesweep.errors import ConfigError
 from livesweep.telemetry.clock import StampClock
+from livesweep.telemetry.extract import SIGNAL_COUNT_KEYS, as_number, compile_signal, lookup  # as_number: re-exported
 from livesweep.telemetry.frames import Frame
-from livesweep.telemetry.mcap_log import get_field
 
 __all__ = ["AlignedBlock", "GridAligner", "as_number"]
 
 _EPS_S = 1e-7   # stamps within 0.1 us of a grid time are on it (grid times carry float round-off)
 _FIRST_SAMPLES = 4   # a signal's spacing is the median of its first few (the grid starts once all have one)
-_MISSING = object()
 _SAME_REBOOT_S = 10.0   # re-anchorings of one vehicle this close (offset and new stamps) are one reboot
-
-
-def as_number(raw) -> float | None:
-    """``raw`` as a finite float, or None (not a number, a bool, NaN, inf, or beyond float range)."""
-    if isinstance(raw, bool) or not isinstance(raw, (int, float)):
-        return None
-    try:
-        v = float(raw)
-    except OverflowError:          # an integer beyond float range (e.g. 400 digits)
-        return None
-    return v if math.isfinite(v) else None
 
 
 def _wrap_units(topic: str, field: str) -> int | None:
@@ -160,6 +156,19 @@ class GridAligner:
         self.by_topic: dict[str, list[str]] = {}
         for n, s in self.specs.items():
             self.by_topic.setdefault(s.topic, []).append(n)
+        self.extractors = {n: compile_signal(s) for n, s in self.specs.items()}
+        self._locked_topics = {t for t, ns in self.by_topic.items()
+                               if any(self.extractors[n].follows_vehicle_lock for n in ns)}
+        self._plain_groups: dict[str, dict[tuple, list[str]]] = {}   # topics without any selection: fixed groups
+        for t, ns in self.by_topic.items():
+            if all(self.extractors[n].follows_vehicle_lock and not self.extractors[n].conditions for n in ns):
+                g: dict[tuple, list[str]] = {}
+                for n in ns:
+                    g.setdefault((self.specs[n].stamp, None), []).append(n)
+                self._plain_groups[t] = g
+        #: Per signal: samples taken, and frames of its topic that gave it none (missing_field,
+        #: not_a_number, filtered by its sysid/compid/where, other_vehicle: left out by the lock).
+        self.signal_counts = {n: dict.fromkeys(SIGNAL_COUNT_KEYS, 0) for n in self.names}
         self.clocks: dict[tuple[str, str], StampClock] = {}
         self.system = None                           # the system id analysed (the first seen)
         self.components: dict[str, int] = {}          # topic -> the component id followed
@@ -176,8 +185,9 @@ class GridAligner:
                        "samples_expired": 0}
 
     # -- input ------------------------------------------------------------------------------
-    def _clock(self, frame: Frame, stamp: str, scale: float) -> StampClock:
-        key = (frame.topic, stamp)
+    def _clock(self, frame: Frame, stamp: str, scale: float, key: tuple | None = None) -> StampClock:
+        """The stamp clock of (topic, stamp field), or of ``key`` (a signal with its own sysid/compid)."""
+        key = key or (frame.topic, stamp)
         c = self.clocks.get(key)
         if c is None:
             vehicle = frame.data.get("sysid", frame.topic)
@@ -216,44 +226,70 @@ class GridAligner:
         """(name, value in signal units) of the signals ``frame`` carries; the rest counted."""
         out = []
         for n in names:
-            spec = self.specs[n]
-            raw = frame.data.get(spec.field, _MISSING)
-            if raw is _MISSING:                        # a dotted path ("gyro.x", "servo.0"), as offline
-                found, raw = get_field(frame.data, spec.field) if "." in spec.field else (False, None)
-                if not found:
-                    self.counts["missing_field"] += 1
-                    continue
-            v = as_number(raw)
-            if v is None:
-                self.counts["not_a_number"] += 1
+            v, problem = self.extractors[n].value(frame.data)
+            if problem is not None:
+                self.counts[problem] += 1
+                self.signal_counts[n][problem] += 1
                 continue
-            out.append((n, spec.scale * v + spec.offset))
+            out.append((n, v))
         return out
+
+    def _taking(self, names, frame: Frame) -> dict[tuple, list[str]]:
+        """The signals of ``names`` that take ``frame`` (vehicle lock, sysid/compid/where), grouped by
+        (stamp field, clock key); the others counted."""
+        locked_ok = frame.topic not in self._locked_topics or self._same_vehicle(frame)
+        plain = self._plain_groups.get(frame.topic)
+        if plain is not None and locked_ok:
+            return plain
+        groups: dict[tuple, list[str]] = {}
+        for n in names:
+            ex = self.extractors[n]
+            if ex.follows_vehicle_lock and not locked_ok:
+                self.signal_counts[n]["other_vehicle"] += 1
+                continue
+            if ex.conditions:
+                sel = ex.selects(frame.data)
+                if sel is None:
+                    self.counts["missing_field"] += 1
+                    self.signal_counts[n]["missing_field"] += 1
+                    continue
+                if not sel:
+                    self.signal_counts[n]["filtered"] += 1
+                    continue
+            spec = self.specs[n]
+            own = None if ex.follows_vehicle_lock else (spec.sysid, spec.compid)
+            groups.setdefault((spec.stamp, own), []).append(n)
+        return groups
 
     def push(self, frame: Frame) -> None:
         """Take the samples a frame carries (frames of other topics are ignored)."""
         names = self.by_topic.get(frame.topic)
-        if not names or not isinstance(frame.data, dict) or not self._same_vehicle(frame):
+        if not names or not isinstance(frame.data, dict):
+            return
+        by_stamp = self._taking(names, frame)
+        if not by_stamp:
             return
         self.counts["frames_used"] += 1
-        by_stamp: dict[str | None, list[str]] = {}
-        for n in names:
-            by_stamp.setdefault(self.specs[n].stamp, []).append(n)
-        for stamp, group in by_stamp.items():
+        for (stamp, own), group in by_stamp.items():
             values = self._values(group, frame)
             if stamp is None:
                 released = [(frame.receive_ns * 1e-9, values)]
             else:
-                raw = frame.data.get(stamp)
+                raw = lookup(frame.data, stamp)              # a dotted path too, as offline
                 if isinstance(raw, bool) or not isinstance(raw, (int, float)):
                     self.counts["missing_field"] += 1
+                    for n, _ in values:
+                        self.signal_counts[n]["missing_field"] += 1
                     continue
-                clock = self._clock(frame, stamp, self.specs[group[0]].stamp_scale)
+                clock_key = None if own is None else (frame.topic, stamp, *own)
+                clock = self._clock(frame, stamp, self.specs[group[0]].stamp_scale, clock_key)
                 before = (clock.wraps, clock.resets, clock.rejected)
                 released = clock.feed(raw, frame.receive_ns * 1e-9, values)
                 for key, b, a in zip(("wraps", "resets", "clock_rejected"), before,
                                      (clock.wraps, clock.resets, clock.rejected)):
                     self.counts[key] += a - b
+            for n, _ in values:
+                self.signal_counts[n]["samples"] += 1
             for t, vals in released:
                 for n, v in vals:
                     self._add(n, t, v)

@@ -1,8 +1,10 @@
 """Named signals out of MCAP logs: the I/O edge between the logs and the numerics.
 
 A case file's ``[signals]`` table (:class:`~livesweep.config.SignalSpec`) says where each signal
-lives: a topic, a field, the field with the vehicle time stamp, and the scaling to engineering
-units. :func:`read_signals` reads the signals one record (:class:`~livesweep.config.RecordSpec`)
+lives: a topic, a field (or arithmetic of fields), the messages to take (``sysid``, ``compid``,
+``where``), the field with the vehicle time stamp, and the scaling to engineering units; the
+signal's :class:`~livesweep.telemetry.extract.SignalExtractor` (the live aligner's too) reads it.
+:func:`read_signals` reads the signals one record (:class:`~livesweep.config.RecordSpec`)
 needs and returns them raw: on the signal's own stamp clock, at the log's own (possibly
 irregular) rate, with NaN where a message carried ``null``. Nothing is resampled or repaired
 here; :mod:`livesweep.consistency.resample` does that and counts what it repairs.
@@ -20,6 +22,7 @@ import numpy as np
 
 from livesweep.config import RecordSpec, SignalSpec
 from livesweep.errors import ConfigError, LogFormatError
+from livesweep.telemetry.extract import SignalExtractor, compile_signal
 from livesweep.telemetry.mcap_log import read_topics_fields
 
 __all__ = ["RawSignal", "read_signals"]
@@ -41,9 +44,11 @@ class RawSignal:
         0.2 us resolution on a UNIX-epoch clock). In the log's message order (log time), which
         may not be monotonic in the stamp; read-only.
     values : numpy.ndarray
-        ``scale * raw + offset`` [units]; NaN where the message carried ``null``; read-only.
+        ``scale * raw + offset`` [units] (``raw``: the field or the expression of fields); NaN
+        where the message carried ``null`` or the expression has no finite value; read-only.
     source : str
-        Where it came from, ``"<log file name>:<topic>.<field>"``.
+        Where it came from, ``"<log file name>:<topic>.<field>"`` (the field as the map writes it,
+        an expression included), with ``[sysid = 1, axis = 2]`` appended when messages are selected.
     """
 
     name: str
@@ -53,28 +58,26 @@ class RawSignal:
     source: str
 
 
-def _group_by_topic(specs: Iterable[SignalSpec]) -> dict[str, list[SignalSpec]]:
+def _group_by_topic(extractors: Iterable[SignalExtractor]) -> dict[str, list[SignalExtractor]]:
     """Signals per topic, in first-seen order."""
-    groups: dict[str, list[SignalSpec]] = {}
-    for s in specs:
-        groups.setdefault(s.topic, []).append(s)
+    groups: dict[str, list[SignalExtractor]] = {}
+    for ex in extractors:
+        groups.setdefault(ex.spec.topic, []).append(ex)
     return groups
 
 
-def _read_topics(log: Path, groups: Mapping[str, list[SignalSpec]],
+def _read_topics(log: Path, groups: Mapping[str, list[SignalExtractor]],
                  notes: list[str] | None) -> dict[str, dict[str, np.ndarray]]:
-    """Every field (values and stamps) of every topic the signals need, in one pass over the log."""
+    """Every field (operands, stamps, selection) of every topic the signals need, in one pass over the log."""
     requests: dict[str, list[str]] = {}
-    for topic, specs in groups.items():
+    for topic, extractors in groups.items():
         fields = requests.setdefault(topic, [])
-        for s in specs:
-            for f in (s.field, s.stamp):
-                if f is not None and f not in fields:
-                    fields.append(f)
+        for ex in extractors:
+            fields.extend(f for f in ex.read_fields if f not in fields)
     try:
         return read_topics_fields(log, requests, time="log", notes=notes)
     except LogFormatError as e:
-        names = ", ".join(s.name for specs in groups.values() for s in specs)
+        names = ", ".join(ex.spec.name for exs in groups.values() for ex in exs)
         raise LogFormatError(f"signal(s) {names}: {e}") from e
 
 
@@ -101,11 +104,18 @@ def _range_text(record: RecordSpec) -> str:
     return f"[{lo}, {hi})"
 
 
-def _make_signal(log: Path, record: RecordSpec, spec: SignalSpec, cols: Mapping[str, np.ndarray]) -> RawSignal:
+def _make_signal(log: Path, record: RecordSpec, ex: SignalExtractor, cols: Mapping[str, np.ndarray]) -> RawSignal:
+    spec = ex.spec
     where = f"{log}: signal {spec.name!r} (topic {spec.topic!r}, field {spec.field!r})"
     t = _stamp_seconds(spec, cols)
     if t.size == 0:
         raise LogFormatError(f"{where}: the topic has no messages")
+    raw = ex.values(cols)
+    chosen = ex.select_columns(cols)
+    if chosen is not None:
+        if not chosen.any():
+            raise LogFormatError(f"{where}: {t.size} messages on the topic, none with {ex.conditions_text()}")
+        t, raw = t[chosen], raw[chosen]
     keep = _crop(t, record)
     if not keep.any():
         finite = t[np.isfinite(t)]
@@ -116,7 +126,7 @@ def _make_signal(log: Path, record: RecordSpec, spec: SignalSpec, cols: Mapping[
             f"the log has {span} on the {clock} clock"
         )
     t = t[keep]
-    values = spec.scale * cols[spec.field][keep] + spec.offset
+    values = raw[keep]
     finite = values[np.isfinite(values)]
     if finite.size == 0:
         raise LogFormatError(f"{where}: all {values.size} values in {_range_text(record)} are NaN (null)")
@@ -128,8 +138,9 @@ def _make_signal(log: Path, record: RecordSpec, spec: SignalSpec, cols: Mapping[
         )
     t.setflags(write=False)
     values.setflags(write=False)
+    selection = f" [{ex.conditions_text()}]" if ex.conditions else ""
     return RawSignal(name=spec.name, units=spec.units, t_s=t, values=values,
-                     source=f"{log.name}:{spec.topic}.{spec.field}")
+                     source=f"{log.name}:{spec.topic}.{spec.field}{selection}")
 
 
 def read_signals(record: RecordSpec, signals: Mapping[str, SignalSpec], names: Iterable[str], *,
@@ -160,11 +171,12 @@ def read_signals(record: RecordSpec, signals: Mapping[str, SignalSpec], names: I
     Raises
     ------
     ConfigError
-        A name not in ``signals``; ``start_s >= end_s``.
+        A name not in ``signals``; ``start_s >= end_s``; a ``field`` that does not parse.
     LogFormatError
         Naming the log file, topic and field: the log is missing or not MCAP; the topic is not
-        in the log (the topics present are listed); a field is missing or not a number; no
-        samples in the time range; a signal whose values are all NaN or constant.
+        in the log (the topics present are listed); a field (operand, stamp or selection field)
+        is missing or not a number; no message matches the signal's selection; no samples in the
+        time range; a signal whose values are all NaN or constant.
     """
     names = list(dict.fromkeys(names))
     if not names:
@@ -176,11 +188,11 @@ def read_signals(record: RecordSpec, signals: Mapping[str, SignalSpec], names: I
         raise ConfigError(f"{record.log}: start_s = {record.start_s!r} must be before end_s = {record.end_s!r}")
     log = Path(record.log)
     out: dict[str, RawSignal] = {}
-    specs_by_name = {n: replace(signals[n], name=n) for n in names}  # the key is the name
-    groups = _group_by_topic(specs_by_name.values())
+    extractors = [compile_signal(replace(signals[n], name=n)) for n in names]  # the key is the name
+    groups = _group_by_topic(extractors)
     all_cols = _read_topics(log, groups, notes)
-    for topic, specs in groups.items():
+    for topic, exs in groups.items():
         cols = all_cols[topic]
-        for s in specs:
-            out[s.name] = _make_signal(log, record, s, cols)
+        for ex in exs:
+            out[ex.spec.name] = _make_signal(log, record, ex, cols)
     return {n: out[n] for n in names}
