@@ -308,12 +308,21 @@ def _identify(args, case) -> int:
 
 
 def _monitor_settings(args):
-    """Channel map and spectral settings from --case (or the packaged XV-15 map) plus CLI overrides."""
-    from livesweep.config import load_channel_map
+    """Channel map, spectral and test-point settings from --map (a preset or a map file) or --case
+    (default: the packaged XV-15 map) plus CLI overrides."""
+    from livesweep.config import read_channel_map
+    from livesweep.maps import load_map
     from livesweep.monitor.pipeline import MonitorSettings
 
-    path = args.case or str(Path(__file__).resolve().parent / "data" / "xv15_channels.toml")
-    signals, spectral = load_channel_map(path)
+    map_arg = getattr(args, "map", None)
+    if map_arg and args.case:
+        raise ConfigError(f"give --case or --map, not both (--case {args.case!r}, --map {map_arg!r})")
+    if map_arg:
+        chosen = load_map(map_arg)
+    else:
+        chosen = read_channel_map(args.case or Path(__file__).resolve().parent / "data" / "xv15_channels.toml",
+                                  one_clock=False)
+    signals, spectral, path = chosen.signals, chosen.spectral, chosen.path
     if spectral is None:
         raise ConfigError(f"{path}: the monitor needs a [spectral] table (inputs, outputs, band_rad_s, sample_rate_hz)")
     for name, value in (("--window", args.window), ("--update-period", args.update_period)):
@@ -326,6 +335,7 @@ def _monitor_settings(args):
         required_pairs=_required_pairs(args.require, spectral),
         saturation_limits=_saturation_limits(args.saturation, spectral),
         references=tuple(spectral.references) if spectral.references else None,
+        test_points=chosen.test_points,
     )
 
 
@@ -550,6 +560,8 @@ def cmd_replay(args) -> int:
 
 def _add_monitor_options(m) -> None:
     m.add_argument("--case", help="case file or channel map ([signals] and [spectral]); default: the XV-15 map")
+    m.add_argument("--map", metavar="NAME|FILE.toml",
+                   help="a channel-map preset (`livesweep maps` lists them) or map file, in place of --case")
     m.add_argument("--window", type=_positive_float, help="sliding window [s] (default 120)")
     m.add_argument("--update-period", type=_positive_float, help="estimate every this many seconds of data (default 0.2)")
     m.add_argument("--rerun-save", metavar="FILE.rrd", help="write the Rerun recording to a file (headless)")
@@ -616,6 +628,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="last stage to run (default: every stage the case defines)")
     i.set_defaults(func=cmd_identify)
 
+    mp = sub.add_parser("maps", help="list the channel-map presets for real vehicles (for monitor/replay --map NAME)")
+    mp.set_defaults(func=cmd_maps)
+
     c = sub.add_parser("convert", help="convert a tlog, DataFlash .bin, PX4 .px4log/.ulg, .npy or delimited text log to MCAP")
     c.add_argument("src", help="the log (its format is recognised by content, not by name)")
     c.add_argument("--out", required=True, help="MCAP file to write")
@@ -650,6 +665,19 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--view", action="store_true", help="open the Rerun viewer instead of writing live.rrd")
     d.set_defaults(func=cmd_demo)
     return p
+
+
+def cmd_maps(args) -> int:
+    """List the channel-map presets: name, description, inputs and outputs, what each needs."""
+    from livesweep.maps import list_maps
+
+    for m in list_maps():
+        print(m.name)
+        print(f"    {m.description}")
+        print(f"    inputs: {', '.join(m.inputs)}; outputs: {', '.join(m.outputs)}")
+        print(f"    needs: {m.needs}")
+    print("use one with: livesweep monitor --map NAME ... / livesweep replay LOG --map NAME")
+    return 0
 
 
 def cmd_convert(args) -> int:
