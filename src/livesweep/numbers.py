@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 __all__ = ["frozen_array", "finite_or_none", "NONFINITE_STRINGS", "nonfinite_text", "nonfinite_value",
-           "float_json_schema", "json_safe"]
+           "float_json_schema", "json_safe", "percent"]
 
 #: How a non-finite float is written in a recorded JSON message, and read back.
 NONFINITE_STRINGS = {"NaN": math.nan, "Infinity": math.inf, "-Infinity": -math.inf}
@@ -82,3 +82,56 @@ def finite_or_none(x, digits: int | None = None) -> float | None:
     if not math.isfinite(x):
         return None
     return round(x, digits) if digits is not None else x
+
+
+def _is_finite(x) -> bool:
+    try:
+        return x is not None and math.isfinite(float(x))
+    except (TypeError, ValueError):
+        return False
+
+
+def percent(fraction: float | None, threshold: float | None = None, *, missing: str = "—") -> str:
+    """A fraction as a percentage, never rounded onto the other side of ``threshold``.
+
+    Parameters
+    ----------
+    fraction : float or None
+        The value, 0..1 (not clipped).
+    threshold : float, optional
+        The fraction it is judged against (e.g. 0.6). When the whole-percent rounding would put
+        the shown number on the other side of it (0.5999 -> "60 %" while 0.5999 < 0.6), one
+        decimal is shown, rounded *away* from the threshold (floor below it, ceiling at or above
+        it): 0.5999 -> "59.9 %", 0.6 -> "60 %", 0.6049 with threshold 0.605 -> "60.4 %".
+    missing : str
+        Text for None, NaN or infinity.
+
+    Returns
+    -------
+    str
+        ``"<number> %"`` (a space before the sign, as in the adequacy tables).
+
+    Notes
+    -----
+    A value strictly between 0 and 0.5 % or between 99.5 and 100 % keeps one decimal (rounded
+    away from 0 and 100), so "0 %" and "100 %" mean exactly none and all.
+    """
+    if not _is_finite(fraction):
+        return missing
+    f = float(fraction)
+    whole = f"{100.0 * f:.0f}"
+    if (whole == "0" and f > 0.0) or (whole == "100" and f < 1.0):   # "0 %"/"100 %" mean none/all
+        tenths = math.ceil(1000.0 * f) if f < 0.5 else math.floor(1000.0 * f)
+        text = f"{tenths / 10.0:.1f}"
+    else:
+        text = whole
+    if threshold is None or not _is_finite(threshold):
+        return f"{text} %"
+    thr = float(threshold)
+    below = f < thr
+    if (float(text) / 100.0 < thr) == below:
+        return f"{text} %"
+    tenths = math.floor(1000.0 * f) if below else math.ceil(1000.0 * f)
+    if (tenths / 1000.0 < thr) != below:     # 1000 * f rounded onto an integer across the threshold
+        tenths += -1 if below else 1
+    return f"{tenths / 10.0:.1f} %"

@@ -10,14 +10,15 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from livesweep.spectral.adequacy import MIN_COHERENCE
+from livesweep.numbers import percent
+from livesweep.spectral.adequacy import MIN_COHERENCE, REQUIRED_FRACTION
 
 __all__ = ["percent", "band_text", "duration_text", "md_cell", "md_table", "omega_text", "sweep_text",
            "coherence_kind_text", "adequacy_markdown", "markdown_test_points", "COHERENCE_KINDS",
            "DEFAULT_REQUIRED_FRACTION"]
 
-#: Fraction of the band a required pair must cover (the monitor's and the test-point judge's default).
-DEFAULT_REQUIRED_FRACTION = 0.6
+#: Fraction of the band a required pair must cover (one definition: livesweep.spectral.adequacy).
+DEFAULT_REQUIRED_FRACTION = REQUIRED_FRACTION
 
 
 def _finite(x) -> bool:
@@ -25,52 +26,6 @@ def _finite(x) -> bool:
         return x is not None and math.isfinite(float(x))
     except (TypeError, ValueError):
         return False
-
-
-def percent(fraction: float | None, threshold: float | None = None, *, missing: str = "—") -> str:
-    """A fraction as a percentage, never rounded onto the other side of ``threshold``.
-
-    Parameters
-    ----------
-    fraction : float or None
-        The value, 0..1 (not clipped).
-    threshold : float, optional
-        The fraction it is judged against (e.g. 0.6). When the whole-percent rounding would put
-        the shown number on the other side of it (0.5999 -> "60 %" while 0.5999 < 0.6), one
-        decimal is shown, rounded *away* from the threshold (floor below it, ceiling at or above
-        it): 0.5999 -> "59.9 %", 0.6 -> "60 %", 0.6049 with threshold 0.605 -> "60.4 %".
-    missing : str
-        Text for None, NaN or infinity.
-
-    Returns
-    -------
-    str
-        ``"<number> %"`` (a space before the sign, as in the adequacy tables).
-
-    Notes
-    -----
-    A value strictly between 0 and 0.5 % or between 99.5 and 100 % keeps one decimal (rounded
-    away from 0 and 100), so "0 %" and "100 %" mean exactly none and all.
-    """
-    if not _finite(fraction):
-        return missing
-    f = float(fraction)
-    whole = f"{100.0 * f:.0f}"
-    if (whole == "0" and f > 0.0) or (whole == "100" and f < 1.0):   # "0 %"/"100 %" mean none/all
-        tenths = math.ceil(1000.0 * f) if f < 0.5 else math.floor(1000.0 * f)
-        text = f"{tenths / 10.0:.1f}"
-    else:
-        text = whole
-    if threshold is None or not _finite(threshold):
-        return f"{text} %"
-    thr = float(threshold)
-    below = f < thr
-    if (float(text) / 100.0 < thr) == below:
-        return f"{text} %"
-    tenths = math.floor(1000.0 * f) if below else math.ceil(1000.0 * f)
-    if (tenths / 1000.0 < thr) != below:     # 1000 * f rounded onto an integer across the threshold
-        tenths += -1 if below else 1
-    return f"{tenths / 10.0:.1f} %"
 
 
 def band_text(band, *, digits: int = 3, missing: str = "—") -> str:

@@ -9,10 +9,12 @@ import numpy as np
 
 from livesweep.spectral.response import FrequencyResponse
 
-__all__ = ["PairAdequacy", "pair_adequacy", "input_power_slope_db_per_decade", "PULSE_LIKE_SLOPE_DB_PER_DECADE", "MIN_COHERENCE", "MAX_RANDOM_ERROR"]
+__all__ = ["PairAdequacy", "pair_adequacy", "input_power_slope_db_per_decade", "PULSE_LIKE_SLOPE_DB_PER_DECADE", "MIN_COHERENCE", "MAX_RANDOM_ERROR", "REQUIRED_FRACTION"]
 
 MIN_COHERENCE = 0.6
 MAX_RANDOM_ERROR = 0.2
+#: Fraction of the band (decades) a required pair must cover for a GO, live and over a test point.
+REQUIRED_FRACTION = 0.6
 #: Input power falling faster than this across the band [dB/decade] looks pulse-like (doublets),
 #: not swept (measured: the shipped XV-15 sweeps -9, their verification doublets -19 and -26 over
 #: 1-20 rad/s; a constant-amplitude exponential sweep falls 10 in theory).

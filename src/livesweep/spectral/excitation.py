@@ -27,7 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from livesweep.errors import ConfigError, require_number
-from livesweep.spectral.adequacy import MAX_RANDOM_ERROR, MIN_COHERENCE, pair_adequacy
+from livesweep.numbers import percent
+from livesweep.spectral.adequacy import MAX_RANDOM_ERROR, MIN_COHERENCE, REQUIRED_FRACTION, pair_adequacy
 from livesweep.spectral.online import OnlineResult
 from livesweep.spectral.response import FrequencyResponse
 
@@ -350,7 +351,7 @@ class ExcitationMonitor:
     """
 
     def __init__(self, inputs, outputs, band_rad_s, sample_rate_hz: float, *, required_pairs=None,
-                 required_fraction: float = 0.6, saturation_limits: dict | None = None,
+                 required_fraction: float = REQUIRED_FRACTION, saturation_limits: dict | None = None,
                  collapse_drop: float = 0.3, max_input_coherence: float = 0.5, min_n_eff: float = 3.0,
                  conditioned: bool = False, coverage_drop_db: float = 20.0,
                  collapse_lookback_s: float | None = None, history_s: float | None = None, fit_s: float = 20.0,
@@ -413,8 +414,24 @@ class ExcitationMonitor:
             new[name] = v
         return new
 
+    def judged(self, result: OnlineResult) -> tuple:
+        """(response set, ``"ordinary"`` or ``"partial"``): the responses the adequacy is judged on,
+        which the view must show (a plot of one coherence next to a verdict on another misleads).
+
+        Through the references when the map names them and they carry power (closed loop: the
+        ordinary coherence there is biased by the feedback); the MISO-conditioned set when
+        ``conditioned`` was asked for; else the ordinary set (a single-axis sweep: the other inputs
+        are the controller's reaction, and conditioning on them would judge the wrong thing).
+        """
+        best = result.best
+        if result.references and best is result.referenced:
+            return best, "partial"
+        if self.conditioned and result.conditioned is not None:
+            return result.conditioned, "partial"
+        return result.ordinary, "ordinary"
+
     def _pair_statuses(self, result: OnlineResult):
-        rs = result.conditioned if (self.conditioned and result.conditioned is not None) else result.ordinary
+        rs, _kind = self.judged(result)
         w = result.omega
         in_band = (w >= self.band_rad_s[0] * (1 - 1e-12)) & (w <= self.band_rad_s[1] * (1 + 1e-12))
         use = in_band & result.usable
@@ -605,8 +622,8 @@ class ExcitationMonitor:
                     verdict = "NO-GO"
                 where = "" if ps.adequate_band_rad_s is None else \
                     f", widest {ps.adequate_band_rad_s[0]:.3g}-{ps.adequate_band_rad_s[1]:.3g} rad/s"
-                reasons.append(f"{ps.output}/{ps.input}: {ps.fraction:.0%} of {band} {word} "
-                               f"(need {self.required_fraction:.0%}){where}")
+                reasons.append(f"{ps.output}/{ps.input}: {percent(ps.fraction, self.required_fraction)} of {band} {word} "
+                               f"(need {percent(self.required_fraction)}){where}")
             if not self.required_pairs:
                 verdict = "NO-GO"
                 reasons.append("no required pairs")

@@ -34,7 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from livesweep.errors import ConfigError
-from livesweep.spectral.adequacy import MAX_RANDOM_ERROR, MIN_COHERENCE
+from livesweep.numbers import percent as _percent
+from livesweep.spectral.adequacy import MAX_RANDOM_ERROR, MIN_COHERENCE, REQUIRED_FRACTION
 from livesweep.spectral.analysis import analyze
 from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW, window_spectra
 from livesweep.spectral.windows import longest_window_samples
@@ -42,8 +43,6 @@ from livesweep.spectral.windows import longest_window_samples
 __all__ = ["PairJudgement", "TestPointJudgement", "judge_test_point", "REQUIRED_FRACTION", "EXCITATION_MARGIN_DB",
            "LOW_FREQUENCY_PERIODS", "COVERAGE_DROP_DB"]
 
-#: Fraction of the band (in decades) each required pair must cover, and the input must excite.
-REQUIRED_FRACTION = 0.6
 #: The swept input's power must stand this far above its pre-test level [dB].
 EXCITATION_MARGIN_DB = 10.0
 #: Periods of its lowest frequency a sweep needs to resolve it (method.md §2.5, T_rec >= 4-5 T_max).
@@ -306,11 +305,3 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
           and (excited is None or excited >= required_fraction))
     return TestPointJudgement(swept_input, "GO" if go else "NO-GO", tuple(pairs), excited,
                               () if go else tuple(missing), tuple(reasons), duration, resolvable)
-
-
-def _percent(fraction: float, threshold: float) -> str:
-    """A percentage that is never rounded onto the other side of ``threshold``."""
-    text = f"{100 * fraction:.0f} %"
-    if (round(fraction, 2) >= threshold) != (fraction >= threshold):
-        text = f"{math.floor(1000 * fraction) / 10:.1f} %"
-    return text
