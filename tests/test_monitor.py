@@ -107,7 +107,11 @@ def test_live_verdict_and_adequacy_for_the_roll_sweep(live):
     p_da = next(a for a in summary["adequacy"] if a["output"] == "p" and a["input"] == "da")
     assert p_da["fraction"] > 0.6
     last = pipe.estimates[-1]
-    assert last.conditioned and last.coherence.shape == (3, 2, last.omega.size)
+    # the coherence shown is the one judged: the ordinary coherence of a single-axis sweep
+    assert last.coherence_kind == "ordinary" and not last.conditioned
+    assert last.coherence.shape == (3, 2, last.omega.size)
+    tp = summary["test_points"][-1]
+    assert (tp["swept_input"], tp["verdict"]) == ("da", "GO") and tp["pairs"][0]["coherence"] == "ordinary"
 
 
 def test_replay_of_the_recording_reproduces_the_live_estimates(live):
@@ -120,6 +124,21 @@ def test_replay_of_the_recording_reproduces_the_live_estimates(live):
     worst = max(np.nanmax(np.abs(live_est[t].coherence - rep_est[t].coherence)) for t in live_est)
     assert worst <= 1e-9
     assert [e.status.verdict for e in pipe.estimates] == [e.status.verdict for e in replay.estimates]
+
+
+def test_replay_reproduces_the_test_points_verdicts_and_alerts_exactly(live, tmp_path):
+    """What the live run recorded on /livesweep/test_point, /livesweep/verdict and /livesweep/alert
+    (the link's own alerts aside: a file has no link), a replay of its recording records again."""
+    from livesweep.telemetry.mcap_log import read_messages
+
+    tmp, _, _, _ = live
+    out = tmp_path / "replay.mcap"
+    MonitorPipeline(SETTINGS, [McapReplaySource(tmp / "live.mcap")], recorder=McapRecorder(out)).run()
+    for topic in ("/livesweep/test_point", "/livesweep/verdict", "/livesweep/alert"):
+        got = [m.data for m in read_messages(out, topics=topic) if m.data.get("kind") != "link"]
+        want = [m.data for m in read_messages(tmp / "live.mcap", topics=topic) if m.data.get("kind") != "link"]
+        assert got == want, topic
+    assert [m.data["verdict"] for m in read_messages(out, topics="/livesweep/verdict")][-1] == "GO"
 
 
 def test_recorded_results_equal_the_live_ones(live):

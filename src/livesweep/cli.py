@@ -496,7 +496,13 @@ def cmd_monitor(args) -> int:
         from livesweep.monitor.markers import HELP, MarkerSource
 
         sources.append(MarkerSource())
-    pipe = MonitorPipeline(settings, sources, recorder=recorder, view=view, publisher=publisher, keep_estimates=False)
+    status = None
+    if args.status or (args.status is None and sys.stderr.isatty()):
+        from livesweep.monitor.status_line import StatusLine
+
+        status = StatusLine(sys.stderr)
+    pipe = MonitorPipeline(settings, sources, recorder=recorder, view=view, publisher=publisher, keep_estimates=False,
+                           status_line=status)
     _stop_on_signals(pipe)
     where = [f"mavlink {getattr(s, 'description', s.url)}" for s in sources if hasattr(s, "url")]
     where += [f"zenoh {args.zenoh}"] if args.zenoh else []
@@ -506,6 +512,8 @@ def cmd_monitor(args) -> int:
 
         print(f"monitor: {HELP}", flush=True)
     summary = pipe.run(duration_s=args.duration)
+    if status is not None:
+        status.close()
     _print_monitor_summary(summary)
     if args.record:
         print(f"wrote {args.record}")
@@ -609,6 +617,9 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--zenoh-publish", action="store_true", help="publish live results under livesweep/...")
     m.add_argument("--record", metavar="FILE.mcap", help="record every message and the live results")
     m.add_argument("--force", action="store_true", help="overwrite an existing --record file")
+    m.add_argument("--status", action=argparse.BooleanOptionalAction, default=None,
+                   help="a one-line status on stderr once a second (frames/s, losses, test point, verdict, sweep); "
+                        "default: when stderr is a terminal")
     m.add_argument("--markers", action=argparse.BooleanOptionalAction, default=None,
                    help="read test-point markers typed in the terminal ('s roll', 'e'); default: when it is one")
     m.add_argument("--duration", type=_positive_float, help="stop after this many seconds (default: Ctrl-C)")

@@ -177,6 +177,7 @@ class Estimate:
     conditioned: bool
     status: object
     n_segments: int
+    coherence_kind: str = "ordinary"      # "ordinary" or "partial": the coherence the adequacy judged
 
 
 @dataclass
@@ -188,6 +189,7 @@ class _Totals:
     ticks_skipped: int = 0          # estimate ticks skipped over a jump of the data clock
     wall_s: float = 0.0
     latency_s: deque = field(default_factory=lambda: deque(maxlen=10_000))
+    verdict_latency_s: deque = field(default_factory=lambda: deque(maxlen=10_000))
 
 
 def _test_point_settings(d: dict):
@@ -240,16 +242,21 @@ class MonitorPipeline:
     queue_limit : int
         Frames that may wait for the analysis; beyond it a live source's frames are skipped by
         the analysis (recorded all the same) and counted in ``analysis_shed``.
+    status_line : livesweep.monitor.status_line.StatusLine, optional
+        Gets a one-line status (frames/s, losses, test point, verdict, sweep frequency, alerts)
+        about once a second, for an operator without Rerun.
     """
 
     def __init__(self, settings: MonitorSettings, sources, *, recorder=None, view=None, publisher=None,
-                 keep_estimates: bool | int = 100, queue_limit: int = QUEUE_LIMIT_FRAMES):
+                 keep_estimates: bool | int = 100, queue_limit: int = QUEUE_LIMIT_FRAMES, status_line=None):
         self.s = settings
         for n in (*settings.inputs, *settings.outputs, *(settings.references or ())):
             if n not in settings.signals:
                 raise ConfigError(f"signal {n!r} is not in the channel map ({', '.join(settings.signals)})")
         self.sources = list(sources)
         self.recorder, self.view, self.publisher = recorder, view, publisher
+        self.status_line = status_line
+        self._status_frames = (time.monotonic(), 0)
         self.names = tuple(dict.fromkeys((*settings.inputs, *settings.outputs, *(settings.references or ()))))
         self.aligner = GridAligner(settings.signals, self.names, settings.sample_rate_hz, max_fill_s=settings.window_s)
         kw = {} if settings.segment_s is None else {"segment_s": settings.segment_s}
@@ -281,6 +288,8 @@ class MonitorPipeline:
         self._t_data: float | None = None             # newest data time analysed [s]
         self.last_status = None
         self._oldest_unlogged: int | None = None      # receive time [ns] of the oldest frame not yet shown
+        self._cause_rx: int | None = None             # receive time [ns] of the oldest frame not yet processed
+        self._live = False
         self._ts_buffer: list[tuple[np.ndarray, np.ndarray]] = []   # time series not yet sent to the view
         self._ts_sent = -math.inf
         self._stop = threading.Event()
@@ -312,7 +321,7 @@ class MonitorPipeline:
         """
         t_start = clock()
         self._t_start = time.monotonic()
-        live = any(getattr(src, "live", False) for src in self.sources)
+        live = self._live = any(getattr(src, "live", False) for src in self.sources)
         queue = FrameQueue(self.queue_limit, shed=live)
         wanted = {spec.topic for spec in self.aligner.specs.values()}
         ingest = self._ingest = Ingest(self.sources, queue, recorder=self.recorder, wanted_topics=wanted,
@@ -378,6 +387,8 @@ class MonitorPipeline:
     # -- frames and test points ------------------------------------------------------------------
     def _take(self, f) -> None:
         """One frame from the queue: to the aligner, and to the test-point tracker when it is evidence."""
+        if self._cause_rx is None:
+            self._cause_rx = f.receive_ns            # the oldest frame whose effects are not shown yet
         before = self.aligner.k_frontier
         self.aligner.push(f)
         if self.aligner.k_frontier != before:
@@ -452,12 +463,15 @@ class MonitorPipeline:
             self.publisher.publish("verdict", payload)
         if self.view is not None:
             self.view.log_alerts(t_s, [("verdict", f"{verdict}: {reasons[0] if reasons else ''}")])
+        if self._cause_rx is not None and self._live:   # receipt of the oldest frame behind it -> shown and recorded
+            self.totals.verdict_latency_s.append((receive_ns() - self._cause_rx) * 1e-9)
 
     def _process(self, t_rx: float) -> None:
         """Every block the aligner has ready, through the estimator tick by tick."""
         while (block := self.aligner.pop_ready()) is not None:
             self._process_block(block, t_rx)
         self._flush_timeseries(t_rx)
+        self._cause_rx = None
 
     def _flush_timeseries(self, now: float, force: bool = False) -> None:
         """Send the buffered time series to the view in one call per signal (every TIMESERIES_EVERY_S)."""
@@ -468,7 +482,8 @@ class MonitorPipeline:
         self._ts_buffer.clear()
         self._ts_sent = now
         self.view.log_timeseries(t, list(self.names), values,
-                                 ["output" if x in self.s.outputs else "input" for x in self.names])
+                                 ["output" if x in self.s.outputs else "input" for x in self.names],
+                                 units=[self.s.signals[x].units for x in self.names])
 
     def _process_block(self, block, t_rx: float) -> None:
         self.totals.blocks += 1
@@ -512,7 +527,7 @@ class MonitorPipeline:
         res = self.estimator.result()
         if res is None:
             return
-        frs = res.best
+        frs, coherence_kind = self.excitation.judged(res)      # shown = judged
         recent = {n: (np.asarray(tt), np.asarray(vv)) for n, (tt, vv) in self._recent.items()}
         lost = sum(self._packets_lost().values())
         gaps = self.aligner.counts["samples_invalid"]
@@ -520,7 +535,8 @@ class MonitorPipeline:
         self._seen_gaps, self._seen_lost = gaps, lost
         mag = 20 * np.log10(np.maximum(np.abs(frs.H), 1e-300))
         phase = np.rad2deg(np.unwrap(np.angle(frs.H), axis=-1))
-        est = Estimate(t_s, frs.omega, frs.coherence, mag, phase, frs.conditioned, status, res.n_segments)
+        est = Estimate(t_s, frs.omega, frs.coherence, mag, phase, frs.conditioned, status, res.n_segments,
+                       coherence_kind)
         self.totals.estimates += 1
         self.last_status = status
         if self.keep_estimates is not False:
@@ -530,7 +546,10 @@ class MonitorPipeline:
         if self.view is not None and t_s - self._last_view_t >= self.s.view_period_s - 1e-9:
             self._last_view_t = t_s
             self.view.log_estimate(t_s, frs.omega, list(frs.outputs), list(frs.inputs), frs.coherence, mag, phase,
-                                   rows, self.verdict or "WAIT", list(self.verdict_reasons))
+                                   rows, self.verdict or "WAIT", list(self.verdict_reasons),
+                                   coherence_kind=coherence_kind,
+                                   sweep={i: (status.sweep_frequency_rad_s.get(i), status.time_remaining_s.get(i))
+                                          for i in self.s.inputs})
             if status.alerts:
                 self.view.log_alerts(t_s, [(a.kind, a.message) for a in status.alerts])
             if self._oldest_unlogged is not None:     # receipt of the oldest frame this estimate includes
@@ -605,6 +624,8 @@ class MonitorPipeline:
                 self.view.log_alerts(self._t_data if self._t_data is not None else 0.0, [(a.kind, a.message)])
             if self.publisher is not None:
                 self.publisher.publish("alert", {"t_s": self._t_data, "kind": a.kind, "message": a.message})
+        if self.status_line is not None:
+            self._status(now, counts)
         if self.recorder is not None:
             self.recorder.record_result("link", {"t_s": self._t_data, "wall_s": round(now - self._t_start, 3),
                                                  "frames_recorded": self.totals.frames,
@@ -614,10 +635,28 @@ class MonitorPipeline:
             if final:
                 self.recorder.set_counters(c)
 
+    def _status(self, now: float, anomalies: dict) -> None:
+        """The one-line terminal status (:mod:`livesweep.monitor.status_line`)."""
+        t_prev, n_prev = self._status_frames
+        self._status_frames = (now, self.totals.frames)
+        cur = self.test_points.current
+        lost = sum(self._packets_lost().values()) + anomalies.get("kernel_drops", 0) + self.analysis_shed
+        last = self.last_status
+        self.status_line.update({
+            "frames_per_s": (self.totals.frames - n_prev) / max(now - t_prev, 1e-9),
+            "frames_lost": lost,
+            "test_point": None if cur is None else f"TP{len(self.test_points.closed) + 1} {cur.swept_input or '?'}",
+            "test_point_elapsed_s": None if cur is None or self._t_data is None else self._t_data - cur.start_s,
+            "verdict": self.verdict or "WAIT",
+            "sweep": {} if last is None else dict(last.sweep_frequency_rad_s),
+            "alerts": self.alerts_raised,
+        })
+
     def _payload(self, est: Estimate, rows) -> dict:
         st = est.status
         return {
             "t_s": est.t_s, "n_segments": est.n_segments, "conditioned": est.conditioned,
+            "coherence_kind": est.coherence_kind,
             "omega_rad_s": est.omega.tolist(),
             "coherence": {f"{o}/{i}": est.coherence[a, b].tolist() for a, o in enumerate(self.s.outputs)
                           for b, i in enumerate(self.s.inputs)},
@@ -671,4 +710,5 @@ class MonitorPipeline:
                 for p in last.pairs],
             "latency_p50_s": float(np.percentile(lat, 50)) if lat.size else None,
             "latency_p99_s": float(np.percentile(lat, 99)) if lat.size else None,
+            "verdict_latency_s": [round(x, 4) for x in self.totals.verdict_latency_s],
         }

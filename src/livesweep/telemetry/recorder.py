@@ -117,6 +117,8 @@ RESULT_SCHEMAS: dict[str, dict] = {
             "t_s": {"type": "number", "description": "data time [s]"},
             "n_segments": _COUNT,
             "conditioned": {"type": "boolean"},
+            "coherence_kind": {"type": "string", "enum": ["ordinary", "partial"],
+                               "description": "the coherence shown is the one the adequacy judged"},
             "omega_rad_s": {"type": "array", "items": {"type": "number"}},
             "coherence": {"type": "object", "description": "output/input -> coherence over omega_rad_s",
                           "additionalProperties": {"type": "array", "items": float_json_schema()}},
