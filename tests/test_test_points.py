@@ -270,3 +270,20 @@ def test_terminal_markers_reach_the_recording_and_open_a_test_point(tmp_path):
     (tp,) = [m.data for m in read_messages(out, topics="/livesweep/test_point")]
     assert marks == ["start", "end"] and (tp["source"], tp["swept_input"]) == ("marker", "dr")
     assert 60 <= tp["end_s"] - tp["start_s"] <= 70 and tp["verdict"] == "GO"
+
+
+def test_a_map_that_matches_nothing_says_which_signals_and_why():
+    """The XV-15 map on a real ArduPilot stream (the shared QuadPlane tlog): every signal is named,
+    with the topic it looked for and what the link carries instead."""
+    from livesweep.telemetry.mavlink_in import TlogSource
+
+    src = TlogSource(shared_data() / "mavlink_tlog" / "uavlogviewer_vtol_sitl.tlog")
+    pipe = MonitorPipeline(XV15, [src], keep_estimates=False)
+    s = pipe.run()
+    assert s["estimates"] == 0
+    topics = set(src.counts["received"])                   # what the tlog carries (its message types)
+    absent = [n for n in pipe.names if XV15.signals[n].topic.split("/")[-1] not in topics]
+    assert absent == ["p", "r", "ay"]                       # SERVO_OUTPUT_RAW is there, HIGHRES_IMU is not
+    assert [line.split(":")[0] for line in s["map_problems"]] == [f"signal {n}" for n in absent]
+    assert all("no frames on /mavlink/HIGHRES_IMU" in line and "/mavlink/ATTITUDE" in line
+               for line in s["map_problems"])

@@ -415,6 +415,8 @@ def _print_monitor_summary(summary: dict, out=sys.stdout) -> None:
     if summary["verdict"]:
         print(f"  verdict: {summary['verdict']}" + (f" ({'; '.join(summary['reasons'])})" if summary["reasons"] else ""),
               file=out)
+    for line in summary.get("map_problems") or ():
+        print(f"  map: {line}", file=out)
     if summary.get("recorded"):
         print(f"  recorded {sum(summary['recorded'].values())} messages", file=out)
 

@@ -122,6 +122,7 @@ class Ingest(threading.Thread):
         self._verdicts: dict[str, bool] = {}     # topic -> wanted (decided once per topic)
         self.drain_timeout_s = float(drain_timeout_s)
         self.received = 0          # frames read from the sources (all recorded, when recording)
+        self.topics_seen: dict = {}  # topic -> (frames, the first frame's data): what a map can match
         self.drained = 0           # of which read while draining at stop
         self.error: BaseException | None = None
         self._stop_event = threading.Event()
@@ -147,6 +148,10 @@ class Ingest(threading.Thread):
         if self.recorder is not None:
             self.recorder.record(frames)
         self.received += len(frames)
+        seen = self.topics_seen
+        for f in frames:
+            entry = seen.get(f.topic)
+            seen[f.topic] = (1, f.data) if entry is None else (entry[0] + 1, entry[1])
         if self.wanted is not None:
             frames = [f for f in frames if self._wants(f.topic)]
         self.queue.put(frames)

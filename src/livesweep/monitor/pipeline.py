@@ -24,6 +24,7 @@ estimates kept for inspection by ``keep_estimates``, the hand-over queue by ``qu
 
 from __future__ import annotations
 
+import logging
 import math
 import sys
 import threading
@@ -43,6 +44,8 @@ from livesweep.telemetry.clock import receive_ns
 
 __all__ = ["MonitorSettings", "Estimate", "MonitorPipeline", "LINK_ANOMALIES"]
 
+log = logging.getLogger(__name__)
+
 PROCESS_EVERY_S = 0.02        # align and estimate at most this often [s of wall time] ...
 PROCESS_EVERY_FRAMES = 500    # ... unless this many frames are waiting
 REPORT_EVERY_S = 1.0          # link counters recorded and checked for alerts this often [s of wall time]
@@ -50,6 +53,7 @@ TIMESERIES_EVERY_S = 0.2      # time series go to the view in batches this often
                               # call holds the interpreter, and one per 20 ms block slowed the recording thread
 QUEUE_LIMIT_FRAMES = 50_000   # frames waiting for the analysis at most (about 50 MB)
 SWITCH_INTERVAL_S = 0.001     # the GIL changes hands at least this often while the monitor runs
+DIAGNOSE_AFTER_S = 5.0        # a map's signals that found nothing are named this long after the first frame [s]
 
 #: Counters whose growth is a ``link`` alert: (where, key, words).
 LINK_ANOMALIES = (
@@ -299,6 +303,8 @@ class MonitorPipeline:
         self._seen_anomalies: dict[str, int] = {}
         self._seen_systems: set = set()
         self.alerts_raised = 0
+        self.map_problems: list[str] | None = None    # signals that found nothing, once diagnosed
+        self._first_frame_at: float | None = None
 
     def request_stop(self) -> None:
         """Stop at the next turn of the loop (safe from a signal handler or another thread)."""
@@ -597,6 +603,7 @@ class MonitorPipeline:
     def _report(self, now: float, final: bool = False) -> None:
         """Record the counters on ``/livesweep/link`` and raise a ``link`` alert for what grew."""
         self._last_report = now
+        self._diagnose(now, final)
         for src in self.sources:
             refresh = getattr(src, "refresh_kernel_drops", None)
             if refresh is not None:
@@ -634,6 +641,29 @@ class MonitorPipeline:
                                         log_time_ns=receive_ns())
             if final:
                 self.recorder.set_counters(c)
+
+    def _diagnose(self, now: float, final: bool) -> None:
+        """Once, a few seconds after the first frame (or at the end): every signal of the map that
+        found nothing, and why (an absent topic, a misspelt field, a selection nothing matches),
+        as a ``map`` alert, a warning on stderr and ``map_problems`` in the summary."""
+        if self.map_problems is not None or self._ingest is None or not self._ingest.received:
+            return
+        if self._first_frame_at is None:
+            self._first_frame_at = now
+        if not final and now - self._first_frame_at < DIAGNOSE_AFTER_S:
+            return
+        from livesweep.telemetry.extract import diagnose
+
+        signals = {n: self.s.signals[n] for n in self.names}
+        self.map_problems = diagnose(signals, self.aligner.signal_counts, dict(self._ingest.topics_seen))
+        for line in self.map_problems:
+            log.warning("monitor: %s", line)
+            a = Alert("map", line, 1.0)
+            self._record_alert(self._t_data, a)
+            if self.view is not None:
+                self.view.log_alerts(self._t_data if self._t_data is not None else 0.0, [(a.kind, a.message)])
+            if self.publisher is not None:
+                self.publisher.publish("alert", {"t_s": self._t_data, "kind": a.kind, "message": a.message})
 
     def _status(self, now: float, anomalies: dict) -> None:
         """The one-line terminal status (:mod:`livesweep.monitor.status_line`)."""
@@ -700,6 +730,7 @@ class MonitorPipeline:
             "sources": [src.counts for src in self.sources],
             "counters": self.counters(),
             "alerts_recorded": self.alerts_raised,
+            "map_problems": list(self.map_problems or ()),
             "recorded": None if self.recorder is None else dict(self.recorder.message_counts),
             "verdict": self.verdict,
             "reasons": list(self.verdict_reasons),

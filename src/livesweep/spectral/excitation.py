@@ -12,7 +12,8 @@ input samples received since the previous update) into an :class:`ExcitationStat
   or two segments is ~1 whatever the data, method.md §2.5), then ``GO`` when every required pair is
   adequate over at least ``required_fraction`` of the band, else ``NO-GO``;
 * alerts: ``coherence_collapse``, ``input_correlation``, ``saturation``, ``data_gap``, ``packet_loss``;
-  the monitor adds ``link`` (link and clock counters that grew, another system on the link).
+  the monitor adds ``link`` (link and clock counters that grew, another system on the link),
+  ``map`` (a signal of the map that found nothing, and why) and ``verdict`` (the verdict changed).
 
 Fractions of the band are measured in log frequency (decades), as a Bode plot shows them: each
 point of the uniform chirp-z grid counts for the log-width of its cell.
@@ -35,7 +36,8 @@ from livesweep.spectral.response import FrequencyResponse
 __all__ = ["Alert", "PairStatus", "ExcitationStatus", "ExcitationMonitor", "SweepTrack", "track_sweep",
            "log_band_weights", "ALERT_KINDS"]
 
-ALERT_KINDS = ("coherence_collapse", "input_correlation", "saturation", "data_gap", "packet_loss", "link")
+ALERT_KINDS = ("coherence_collapse", "input_correlation", "saturation", "data_gap", "packet_loss", "link", "map",
+               "verdict")
 
 
 @dataclass(frozen=True)
