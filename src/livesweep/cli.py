@@ -665,6 +665,7 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--rate-hz", type=_positive_float,
                     help="DataFlash: at most this many of each message per second of log time, as a telemetry "
                          "stream rate (SRx_EXTRA1 = 50) would be (default: the log's own rate)")
+    st.add_argument("--sysid", type=int, help="DataFlash: the MAVLink system id to send as (default 1)")
     st.set_defaults(func=cmd_stream)
 
     from livesweep.batch import add_batch_arguments
@@ -714,7 +715,7 @@ def cmd_stream(args) -> int:
     from livesweep.telemetry.stream_log import stream_log
 
     s = stream_log(args.log, args.mavlink, speed=args.speed, start_s=args.start_s, end_s=args.end_s,
-                   rate_hz=args.rate_hz, on_start=lambda line: print(f"stream: {line}", flush=True))
+                   rate_hz=args.rate_hz, sysid=args.sysid, on_start=lambda line: print(f"stream: {line}", flush=True))
     kind = {"tlog": "MAVLink tlog, frames as recorded", "dataflash": "ArduPilot DataFlash, as ArduCopter's telemetry"}
     clock = "UNIX time" if s.format == "tlog" else "TimeUS"
     print(f"  {kind[s.format]}: {s.log_duration_s:.3f} s of the log, {s.start_s:.3f} .. {s.end_s:.3f} s after its first "

@@ -380,7 +380,7 @@ def _imu(msgname: str, t_us: int, v: Mapping[str, Any]) -> dict:
 
 
 def dataflash_messages(path, *, start_s: float = 0.0, end_s: float | None = None,
-                       rate_hz: float | None = None) -> LogMessages:
+                       rate_hz: float | None = None, sysid: int = 1) -> LogMessages:
     """The MAVLink telemetry ArduCopter sends for what a DataFlash log holds (module docstring).
 
     Parameters
@@ -392,11 +392,13 @@ def dataflash_messages(path, *, start_s: float = 0.0, end_s: float | None = None
     rate_hz : float, optional
         At most this many messages of each kind (and PID axis, IMU instance) per second of log
         time [Hz]; default the log's own rate.
+    sysid : int
+        The MAVLink system id the vehicle sends as (1..255; component 1).
 
     Returns
     -------
     LogMessages
-        Items ``(TimeUS [s since boot], message name, record)``, system 1, component 1.
+        Items ``(TimeUS [s since boot], message name, record)``.
 
     Raises
     ------
@@ -409,6 +411,8 @@ def dataflash_messages(path, *, start_s: float = 0.0, end_s: float | None = None
 
     start, end = _check_window(start_s, end_s)
     rate = _check_rate(rate_hz)
+    if isinstance(sysid, bool) or not isinstance(sysid, int) or not 1 <= sysid <= 255:
+        raise ConfigError(f"sysid {sysid!r} must be an integer from 1 to 255")
     path = Path(path)
     records = iter_dataflash(path, names=_DATAFLASH_TYPES)      # LogFormatError naming the file
 
@@ -479,7 +483,7 @@ def dataflash_messages(path, *, start_s: float = 0.0, end_s: float | None = None
                 if last_bin.get(key) == k:
                     continue
                 last_bin[key] = k
-            rec["sysid"], rec["compid"] = 1, 1
+            rec["sysid"], rec["compid"] = sysid, 1
             yield t_us, name, rec
 
     out = LogMessages(path, "dataflash", start, end, items())
@@ -589,7 +593,8 @@ def _check_speed(speed: Any) -> float:
 
 
 def stream_log(path, url: str, *, speed: float = 1.0, start_s: float = 0.0, end_s: float | None = None,
-               rate_hz: float | None = None, on_start: Callable[[str], Any] | None = None) -> StreamSummary:
+               rate_hz: float | None = None, sysid: int | None = None,
+               on_start: Callable[[str], Any] | None = None) -> StreamSummary:
     """Send the log ``path`` to ``url`` as MAVLink, paced by its own time (module docstring).
 
     Parameters
@@ -605,6 +610,9 @@ def stream_log(path, url: str, *, speed: float = 1.0, start_s: float = 0.0, end_
         The slice to send [s after the log's first time stamp].
     rate_hz : float, optional
         DataFlash only: at most this many of each message per second of log time [Hz].
+    sysid : int, optional
+        DataFlash only: the system id the vehicle sends as (default 1); a second vehicle on the
+        same link is a second stream with another.
     on_start : callable, optional
         Called with a line saying what is about to be sent, once the arguments, the file and the
         link are checked and before the first message.
@@ -627,12 +635,14 @@ def stream_log(path, url: str, *, speed: float = 1.0, start_s: float = 0.0, end_
     path = Path(path)
     fmt = sniff_log(path)
     if fmt == "tlog":
-        if rate_hz is not None:
-            raise ConfigError(f"{path}: --rate-hz thins the messages made from a DataFlash log; a tlog is sent as "
-                              "recorded, frame for frame")
+        for what, value in (("--rate-hz", rate_hz), ("--sysid", sysid)):
+            if value is not None:
+                raise ConfigError(f"{path}: {what} applies to the messages made from a DataFlash log; a tlog is "
+                                  "sent as recorded, frame for frame")
         messages = tlog_messages(path, start_s=start_s, end_s=end_s)
     else:
-        messages = dataflash_messages(path, start_s=start_s, end_s=end_s, rate_hz=rate_hz)
+        messages = dataflash_messages(path, start_s=start_s, end_s=end_s, rate_hz=rate_hz,
+                                      sysid=1 if sysid is None else sysid)
     try:
         # the first message before the clock starts: reaching a late --start-s reads the log up
         # to it, which must not count as sending time (the first messages would go out in a burst)
