@@ -438,8 +438,10 @@ class MonitorPipeline:
             if tracker.current is not None:
                 rec = tracker.current.record("open")
             elif tracker.closing:
+                # the final judgement is a data tick away: the running verdict holds until it comes
+                # (no GO -> WAIT -> GO flicker on the operator's screen and in the recording)
                 rec = tracker.closing[-1].record("open")
-                return "WAIT", (f"test point ended at {tracker.closing[-1].end_s:.1f} s: judging",), rec
+                return self.verdict or "WAIT", (f"test point ended at {tracker.closing[-1].end_s:.1f} s: judging",), rec
             elif tracker.closed:
                 rec = tracker.closed[-1]
             else:
