@@ -404,6 +404,10 @@ class MonitorPipeline:
             if t is None:
                 return                       # no data yet: nothing a test point could hold
             for ev in self.test_points.events_of(f, t, self.aligner.system):
+                # the samples up to the event first: its pre-test baseline must not depend on how
+                # many frames arrived together (a replay takes thousands at once, a live link a few)
+                while (block := self.aligner.pop_ready()) is not None:
+                    self._process_block(block, time.monotonic())
                 self._test_point_records(self.test_points.event(ev))
                 self._update_verdict(ev.t_s)
 
