@@ -36,7 +36,7 @@ import numpy as np
 
 from livesweep.errors import ConfigError
 from livesweep.monitor.ingest import FrameQueue, Ingest
-from livesweep.monitor.testpoints import SOURCES, TestPointTracker
+from livesweep.monitor.testpoints import GRID_TOL, SOURCES, TestPointTracker
 from livesweep.spectral.excitation import Alert, ExcitationMonitor
 from livesweep.spectral.online import OnlineSpectralEstimator
 from livesweep.telemetry.align import GridAligner
@@ -520,7 +520,8 @@ class MonitorPipeline:
         # feed the estimator tick by tick so estimates depend on data time only
         start = 0
         while start < n:
-            k_tick = int(math.floor((self._next_tick - block.t0_s) * fs + 1e-9)) + 1   # samples up to the tick
+            # samples up to the tick; GRID_TOL: a tick on a sample stays on it whatever block it falls in
+            k_tick = int(math.floor((self._next_tick - block.t0_s) * fs + GRID_TOL)) + 1
             stop = min(n, max(k_tick, start))
             if stop > start:
                 self.estimator.update(block.values[:, start:stop], block.valid[start:stop])

@@ -46,6 +46,13 @@ SOURCES = ("autopilot", "marker", "sweep")
 MARKER_TOPIC = "/marker/terminal"
 #: ArduCopter's flight-mode number of SYSTEMID (custom_mode of HEARTBEAT, Mode of DataFlash MODE).
 ARDUPILOT_SYSTEMID_MODE = 25
+#: How near a grid sample a time may be and still count as on it [fraction of a sample period].
+#: Times are seconds on the vehicle clock or, for receive-time maps, since the UNIX epoch, where
+#: float64 resolves 2.4e-7 s: a grid time computed two ways (a block's start plus k / fs, a record's
+#: rounded end) differs by up to ~1e-5 of a sample at 50 Hz, which must not move a sample in or
+#: out of a test point (the live run and its replay would then disagree).
+GRID_TOL = 1e-3
+
 #: An open test point is judged this often [s of data].
 JUDGE_EVERY_S = 5.0
 #: A test point is closed when it reaches this length [s] (bounds memory).
@@ -114,7 +121,7 @@ class TestPoint:
         if self.end_s is None:
             return
         for k, t0 in enumerate(self.t0):
-            keep = max(int(math.floor((self.end_s - t0) * fs + 1e-6)) + 1, 0)
+            keep = max(int(math.floor((self.end_s - t0) * fs + GRID_TOL)) + 1, 0)
             self.values[k], self.valid[k] = self.values[k][:, :keep], self.valid[k][:keep]
 
     def duration_s(self, fs: float) -> float:
@@ -369,8 +376,8 @@ class TestPointTracker:
         quiet_from = self._last_end if self._last_end is not None else -math.inf
         before = []
         for t0, values, valid in self._pre:      # split the recent samples at the start
-            k = int(np.clip(math.ceil((ev.t_s - t0) * self.fs - 1e-6), 0, values.shape[1]))
-            q = 0 if quiet_from <= t0 else min(int(math.ceil((quiet_from - t0) * self.fs - 1e-6)), k)
+            k = int(np.clip(math.ceil((ev.t_s - t0) * self.fs - GRID_TOL), 0, values.shape[1]))
+            q = 0 if quiet_from <= t0 else min(int(math.ceil((quiet_from - t0) * self.fs - GRID_TOL)), k)
             before.append(values[:, q:k])            # the baseline: not the tail of an earlier test point
             if k < values.shape[1]:
                 tp.t0.append(t0 + k / self.fs)
@@ -399,9 +406,10 @@ class TestPointTracker:
             for ev in self._sweep.feed(t, rows):
                 out += self.event(ev)
         for tp in [*self.closing, *([self.current] if self.current is not None else [])]:
-            start = int(np.searchsorted(t, tp.start_s - 1e-9))
-            stop = n if tp.end_s is None else int(np.searchsorted(t, tp.end_s + 1e-9))
-            if stop > start and (not tp.t0 or t[start] > tp.t0[-1] + 1e-9):
+            tol = GRID_TOL / self.fs
+            start = int(np.searchsorted(t, tp.start_s - tol))
+            stop = n if tp.end_s is None else int(np.searchsorted(t, tp.end_s + tol))
+            if stop > start and (not tp.t0 or t[start] > tp.t0[-1] + tol):
                 tp.t0.append(float(t[start]))
                 tp.values.append(values[:, start:stop])
                 tp.valid.append(valid[start:stop])
@@ -455,7 +463,7 @@ class TestPointTracker:
             return
         values, valid = tp.samples()
         if until_s is not None:
-            n = max(int(math.floor((until_s - tp.t0[0]) * self.fs + 1e-6)) + 1, 0)
+            n = max(int(math.floor((until_s - tp.t0[0]) * self.fs + GRID_TOL)) + 1, 0)
             values, valid = values[:, :n], valid[:n]
         swept = tp.swept_input
         if swept is None:                      # the evidence did not say: the input that moved most
