@@ -255,6 +255,30 @@ def test_a_killed_monitor_leaves_a_readable_recording(tmp_path):
     assert sent - 1.5 * rate <= got <= sent
 
 
+VERDICT_KILL_CHILD = """
+import os, signal, sys
+from livesweep.telemetry.recorder import McapRecorder
+rec = McapRecorder(sys.argv[1], flush_interval_s=3600.0)     # no timed flush in this run
+rec.record_result("alert", {"t_s": 1.0, "kind": "x", "message": "m"}, log_time_ns=1_000_000_000)
+rec.record_result("verdict", {"t_s": 2.0, "verdict": "GO"}, log_time_ns=2_000_000_000, flush=True)
+rec.record_result("alert", {"t_s": 3.0, "kind": "x", "message": "m"}, log_time_ns=3_000_000_000)
+os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+
+def test_a_verdict_change_is_in_the_file_at_once_and_survives_a_kill(tmp_path):
+    """A verdict reaches the file when it is recorded, not at the next timed flush: killed right
+    after, the file holds it (and what came before it); the unflushed alert after it is lost."""
+    from livesweep.telemetry.mcap_log import read_messages
+
+    out = tmp_path / "killed.mcap"
+    proc = subprocess.run([sys.executable, "-c", VERDICT_KILL_CHILD, str(out)], capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == -9, proc.stderr
+    got = [(m.topic, m.data["t_s"]) for m in read_messages(out)]
+    assert got == [("/livesweep/alert", 1.0), ("/livesweep/verdict", 2.0)]
+
+
 def test_a_quiet_second_input_falls_back_to_ordinary_responses():
     """One axis swept, the other exactly still: the swept pair is still shown (not blanked by a
     singular conditioning) and matches the model."""

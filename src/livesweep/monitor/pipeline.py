@@ -429,7 +429,7 @@ class MonitorPipeline:
                 self.view.log_test_point(t_s, rec)
             if rec["state"] == "closed":
                 if self.recorder is not None:
-                    self.recorder.record_result("test_point", rec, log_time_ns=receive_ns())
+                    self.recorder.record_result("test_point", rec, log_time_ns=receive_ns(), flush=True)
                 if self.publisher is not None:
                     self.publisher.publish("test_point", rec)
             self._update_verdict(t_s, rec)
@@ -470,7 +470,7 @@ class MonitorPipeline:
                                                                                 "swept_input", "state")}}
         self.verdict = verdict
         if self.recorder is not None:
-            self.recorder.record_result("verdict", payload, log_time_ns=receive_ns())
+            self.recorder.record_result("verdict", payload, log_time_ns=receive_ns(), flush=True)
         if self.publisher is not None:
             self.publisher.publish("verdict", payload)
         if self.view is not None:

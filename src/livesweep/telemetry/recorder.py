@@ -221,13 +221,20 @@ class McapRecorder:
                         log.warning("%s (further such frames are only counted)", e)
             self._maybe_flush()
 
-    def record_result(self, name: str, payload: dict, log_time_ns: int) -> None:
-        """Write a live result on ``/livesweep/<name>`` (schema from :data:`RESULT_SCHEMAS`)."""
+    def record_result(self, name: str, payload: dict, log_time_ns: int, *, flush: bool = False) -> None:
+        """Write a live result on ``/livesweep/<name>`` (schema from :data:`RESULT_SCHEMAS`).
+
+        ``flush=True`` hands it to the OS at once (verdict changes and closed test points: rare,
+        and what an operator acts on, so a kill right after must not lose them).
+        """
         topic = f"{RESULT_PREFIX}/{name}"
         schema = RESULT_SCHEMAS.get(name, {"type": "object", "description": f"livesweep live {name}"})
         with self._lock:
             self._channel(topic, (f"livesweep.{name}", schema))
             self.writer.write(topic, payload, log_time_ns=log_time_ns)
+            if flush:
+                self.writer.flush()
+                self._last_flush = self._clock()
 
     def set_counters(self, counters: dict) -> None:
         """The final counters, written as the :data:`COUNTERS_METADATA` record when the file is closed."""
