@@ -501,13 +501,13 @@ class MonitorPipeline:
         self.totals.blocks += 1
         fs = self.s.sample_rate_hz
         n = block.values.shape[1]
-        t = block.t0_s + np.arange(n) / fs
+        t = block.t_s if block.t_s is not None else block.t0_s + np.arange(n) / fs
         self._t_data = float(t[-1])
         if self.view is not None:
             self._ts_buffer.append((t, block.values))
         if self.verdict is None:
             self._update_verdict(block.t0_s)
-        self._test_point_records(self.test_points.block(block.t0_s, block.values, block.valid))
+        self._test_point_records(self.test_points.block(block.t0_s, block.values, block.valid, t))
         if self._next_tick is None:
             self._next_tick = block.t0_s + self.s.update_period_s
             self._t_first = block.t0_s

@@ -391,12 +391,15 @@ class TestPointTracker:
         self.current = tp
         return [(ev.t_s, tp.record("open"))]
 
-    def block(self, t0: float, values: np.ndarray, valid: np.ndarray) -> list[tuple[float, dict]]:
-        """Take one aligned block (start time [s], (n_signals, n), (n,)); returns ``(data time [s],
-        record)`` of the test points it opened (sweep detection), judged while open, or closed."""
+    def block(self, t0: float, values: np.ndarray, valid: np.ndarray,
+              t: np.ndarray | None = None) -> list[tuple[float, dict]]:
+        """Take one aligned block (start time [s], (n_signals, n), (n,), and optionally its sample
+        times [s], :attr:`AlignedBlock.t_s`); returns ``(data time [s], record)`` of the test
+        points it opened (sweep detection), judged while open, or closed."""
         out = []
         n = values.shape[1]
-        t = t0 + np.arange(n) / self.fs
+        if t is None:
+            t = t0 + np.arange(n) / self.fs
         self._pre.append((t0, values, valid))    # first: a test point opened by this block splits it
         keep_from = t0 - PRE_TEST_S - _MAX_DETECTION_S  # by time, so what is kept does not depend on block sizes
         while self._pre and self._pre[0][0] + self._pre[0][1].shape[1] / self.fs < keep_from:

@@ -87,11 +87,16 @@ class AlignedBlock:
     values : ndarray, shape (n_signals, n)
     valid : ndarray of bool, shape (n,)
         False where any signal is in a gap.
+    t_s : ndarray, shape (n,), optional
+        The sample times [s]: ``t0 + k / fs`` from the grid's own origin, so a sample has the same
+        time to the last bit whatever block it comes in (a live link's few samples per block or a
+        replay's thousands). None: ``t0_s + arange(n) / fs``.
     """
 
     t0_s: float
     values: np.ndarray
     valid: np.ndarray
+    t_s: np.ndarray | None = None
 
 
 class _Channel:
@@ -397,7 +402,7 @@ class GridAligner:
             if keep_from > 0:
                 del c.t[:keep_from]
                 del c.v[:keep_from]
-        block = AlignedBlock(float(tk[0]), values, valid)
+        block = AlignedBlock(float(tk[0]), values, valid, tk)
         self.next_k = k_end
         self.counts["samples_emitted"] += tk.size
         self.counts["samples_invalid"] += int(np.sum(~valid))
