@@ -104,7 +104,8 @@ class Ingest(threading.Thread):
     queue : FrameQueue
     recorder : McapRecorder, optional
     wanted_topics : set of str, optional
-        Topics the analysis uses; other frames are recorded but not queued (None: all).
+        Topics the analysis uses; other frames are recorded but not queued, bar the first of each
+        topic (None: all).
     also_wanted : callable, optional
         ``also_wanted(topic) -> bool`` for further topics the analysis uses (test-point evidence).
     drain_timeout_s : float
@@ -149,11 +150,18 @@ class Ingest(threading.Thread):
             self.recorder.record(frames)
         self.received += len(frames)
         seen = self.topics_seen
+        first = None
         for f in frames:
             entry = seen.get(f.topic)
-            seen[f.topic] = (1, f.data) if entry is None else (entry[0] + 1, entry[1])
+            if entry is None:
+                seen[f.topic] = (1, f.data)
+                first = (first or set()) | {id(f)}
+            else:
+                seen[f.topic] = (entry[0] + 1, entry[1])
         if self.wanted is not None:
-            frames = [f for f in frames if self._wants(f.topic)]
+            # and the first frame of every other topic: the analysis names what the link carries
+            # when a map finds nothing, from the frames it took (so a replay names the same)
+            frames = [f for f in frames if self._wants(f.topic) or (first is not None and id(f) in first)]
         self.queue.put(frames)
 
     def _wants(self, topic: str) -> bool:

@@ -36,7 +36,7 @@ import numpy as np
 
 from livesweep.errors import ConfigError
 from livesweep.monitor.ingest import FrameQueue, Ingest
-from livesweep.monitor.testpoints import GRID_TOL, SOURCES, TestPointTracker
+from livesweep.monitor.testpoints import CLOSE_WAIT_S, GRID_TOL, SOURCES, TestPointTracker
 from livesweep.spectral.excitation import Alert, ExcitationMonitor
 from livesweep.spectral.online import OnlineSpectralEstimator
 from livesweep.telemetry.align import GridAligner
@@ -53,7 +53,7 @@ TIMESERIES_EVERY_S = 0.2      # time series go to the view in batches this often
                               # call holds the interpreter, and one per 20 ms block slowed the recording thread
 QUEUE_LIMIT_FRAMES = 50_000   # frames waiting for the analysis at most (about 50 MB)
 SWITCH_INTERVAL_S = 0.001     # the GIL changes hands at least this often while the monitor runs
-DIAGNOSE_AFTER_S = 5.0        # a map's signals that found nothing are named this long after the first frame [s]
+DIAGNOSE_AFTER_S = 5.0        # a map's signals that found nothing are named this long after the first frame [s of receive time]
 
 #: Counters whose growth is a ``link`` alert: (where, key, words).
 LINK_ANOMALIES = (
@@ -304,7 +304,11 @@ class MonitorPipeline:
         self._seen_systems: set = set()
         self.alerts_raised = 0
         self.map_problems: list[str] | None = None    # signals that found nothing, once diagnosed
-        self._first_frame_at: float | None = None
+        self._map_missing: list[str] = []              # ... of which not found since
+        self._first_rx: int | None = None               # receive time of the first frame [ns]
+        self._topics_seen: dict = {}                    # topic -> (frames taken, the first one's data)
+        self._analysed: dict[str, bool] = {}            # topic -> the analysis uses it
+        self._wanted = {spec.topic for spec in self.aligner.specs.values()}   # the map's topics
 
     def request_stop(self) -> None:
         """Stop at the next turn of the loop (safe from a signal handler or another thread)."""
@@ -329,8 +333,7 @@ class MonitorPipeline:
         self._t_start = time.monotonic()
         live = self._live = any(getattr(src, "live", False) for src in self.sources)
         queue = FrameQueue(self.queue_limit, shed=live)
-        wanted = {spec.topic for spec in self.aligner.specs.values()}
-        ingest = self._ingest = Ingest(self.sources, queue, recorder=self.recorder, wanted_topics=wanted,
+        ingest = self._ingest = Ingest(self.sources, queue, recorder=self.recorder, wanted_topics=self._wanted,
                                        also_wanted=self.test_points.wants)
         switch = sys.getswitchinterval()
         sys.setswitchinterval(min(switch, SWITCH_INTERVAL_S))   # the ingest thread gets the GIL promptly
@@ -393,23 +396,44 @@ class MonitorPipeline:
     # -- frames and test points ------------------------------------------------------------------
     def _take(self, f) -> None:
         """One frame from the queue: to the aligner, and to the test-point tracker when it is evidence."""
+        entry = self._topics_seen.get(f.topic)
+        self._topics_seen[f.topic] = (1, f.data) if entry is None else (entry[0] + 1, entry[1])
+        analysed = self._analysed.get(f.topic)
+        if analysed is None:
+            analysed = self._analysed[f.topic] = f.topic in self._wanted or self.test_points.wants(f.topic)
+        if not analysed:                     # the first frame of a topic the map does not use: seen, no more
+            if self.map_problems is None:
+                self._map_check(f.receive_ns)
+            return
         if self._cause_rx is None:
             self._cause_rx = f.receive_ns            # the oldest frame whose effects are not shown yet
         before = self.aligner.k_frontier
         self.aligner.push(f)
         if self.aligner.k_frontier != before:
             self._rx_to_data = (f.receive_ns, self.aligner.frontier_s)
+        if self.map_problems is None or self._map_missing:
+            self._map_check(f.receive_ns)
         if self.test_points.wants(f.topic):
             t = self._data_time(f.receive_ns)
             if t is None:
                 return                       # no data yet: nothing a test point could hold
             for ev in self.test_points.events_of(f, t, self.aligner.system):
-                # the samples up to the event first: its pre-test baseline must not depend on how
-                # many frames arrived together (a replay takes thousands at once, a live link a few)
-                while (block := self.aligner.pop_ready()) is not None:
-                    self._process_block(block, time.monotonic())
+                self._drain_blocks()         # the samples up to the event first (its pre-test baseline)
                 self._test_point_records(self.test_points.event(ev))
                 self._update_verdict(ev.t_s)
+        if (self.test_points.closing and (t := self._data_time(f.receive_ns)) is not None
+                and t >= min(tp.end_s for tp in self.test_points.closing) + CLOSE_WAIT_S):
+            # an ended test point no samples reach (no telemetry at all): judged on what it has
+            self._drain_blocks()
+            if records := self.test_points.expire(t):
+                self._test_point_records(records)
+
+    def _drain_blocks(self) -> None:
+        """Every block the aligner has ready, now: what follows (a test-point event, a map alert)
+        then sees the same samples whatever the batch sizes (a replay takes thousands of frames at
+        once, a live link a few)."""
+        while (block := self.aligner.pop_ready()) is not None:
+            self._process_block(block, time.monotonic())
 
     def _data_time(self, receive_ns: int) -> float | None:
         """The data time [s] of a frame without a usable stamp (a STATUSTEXT, a marker): the aligner's
@@ -610,7 +634,8 @@ class MonitorPipeline:
     def _report(self, now: float, final: bool = False) -> None:
         """Record the counters on ``/livesweep/link`` and raise a ``link`` alert for what grew."""
         self._last_report = now
-        self._diagnose(now, final)
+        if final and self.map_problems is None and self._topics_seen:
+            self._diagnose()                 # a run shorter than DIAGNOSE_AFTER_S
         for src in self.sources:
             refresh = getattr(src, "refresh_kernel_drops", None)
             if refresh is not None:
@@ -649,28 +674,51 @@ class MonitorPipeline:
             if final:
                 self.recorder.set_counters(c)
 
-    def _diagnose(self, now: float, final: bool) -> None:
-        """Once, a few seconds after the first frame (or at the end): every signal of the map that
-        found nothing, and why (an absent topic, a misspelt field, a selection nothing matches),
-        as a ``map`` alert, a warning on stderr and ``map_problems`` in the summary."""
-        if self.map_problems is not None or self._ingest is None or not self._ingest.received:
-            return
-        if self._first_frame_at is None:
-            self._first_frame_at = now
-        if not final and now - self._first_frame_at < DIAGNOSE_AFTER_S:
-            return
+    def _map_check(self, receive_ns: int) -> None:
+        """Diagnose the map DIAGNOSE_AFTER_S of receive time after the first frame; after that, watch
+        for the signals it found missing. Driven by the frames' own receive times, so a replay
+        raises the same ``map`` alerts at the same data times as the live run did."""
+        if self.map_problems is None:
+            if self._first_rx is None:
+                self._first_rx = receive_ns
+            elif receive_ns - self._first_rx >= DIAGNOSE_AFTER_S * 1e9:
+                self._diagnose()
+        else:
+            self._map_found_later()
+
+    def _diagnose(self) -> None:
+        """Every signal of the map that found nothing, and why (an absent topic, a misspelt field, a
+        selection nothing matches), as a ``map`` alert, a warning on stderr and ``map_problems``
+        in the summary."""
         from livesweep.telemetry.extract import diagnose
 
         signals = {n: self.s.signals[n] for n in self.names}
-        self.map_problems = diagnose(signals, self.aligner.signal_counts, dict(self._ingest.topics_seen))
+        self.map_problems = diagnose(signals, self.aligner.signal_counts, self._topics_seen)
+        self._map_missing = [n for n in self.names if self.aligner.signal_counts[n]["samples"] == 0]
+        if self.map_problems:
+            self._drain_blocks()
         for line in self.map_problems:
-            log.warning("monitor: %s", line)
-            a = Alert("map", line, 1.0)
-            self._record_alert(self._t_data, a)
-            if self.view is not None:
-                self.view.log_alerts(self._t_data if self._t_data is not None else 0.0, [(a.kind, a.message)])
-            if self.publisher is not None:
-                self.publisher.publish("alert", {"t_s": self._t_data, "kind": a.kind, "message": a.message})
+            self._map_alert(line)
+
+    def _map_found_later(self) -> None:
+        """A signal the diagnosis found missing that has samples now (a vehicle that starts its
+        streams once armed): say so, so the early warning does not stand."""
+        found = [n for n in self._map_missing if self.aligner.signal_counts[n]["samples"] > 0]
+        if found:
+            self._drain_blocks()             # the alert's data time: every sample taken so far
+        for n in found:
+            self._map_missing.remove(n)
+            left = len(self._map_missing)
+            self._map_alert(f"signal {n}: found now ({'every signal found' if not left else f'{left} still missing'})")
+
+    def _map_alert(self, line: str) -> None:
+        log.warning("monitor: %s", line)
+        a = Alert("map", line, 1.0)
+        self._record_alert(self._t_data, a)
+        if self.view is not None:
+            self.view.log_alerts(self._t_data if self._t_data is not None else 0.0, [(a.kind, a.message)])
+        if self.publisher is not None:
+            self.publisher.publish("alert", {"t_s": self._t_data, "kind": a.kind, "message": a.message})
 
     def _status(self, now: float, anomalies: dict) -> None:
         """The one-line terminal status (:mod:`livesweep.monitor.status_line`)."""

@@ -55,6 +55,11 @@ GRID_TOL = 1e-3
 
 #: An open test point is judged this often [s of data].
 JUDGE_EVERY_S = 5.0
+#: A test point that ended is judged on the samples it has once this much data time has passed
+#: since its end with none reaching it [s] (no telemetry at all: the judgement must not wait for
+#: data that never comes). The aligner marks a silent signal invalid after 2 s, so samples that
+#: exist arrive well within it.
+CLOSE_WAIT_S = 3.0
 #: A test point is closed when it reaches this length [s] (bounds memory).
 MAX_TEST_POINT_S = 900.0
 #: Samples before a test point compared with it for the excitation check [s].
@@ -433,6 +438,16 @@ class TestPointTracker:
                 self.closing.append(cur)
                 if t[-1] >= cur.end_s:
                     out += self._close(cur)
+        return out
+
+    def expire(self, t_s: float) -> list[tuple[float, dict]]:
+        """Close the test points that ended more than :data:`CLOSE_WAIT_S` before data time ``t_s``
+        (told by a frame that carries no samples: a HEARTBEAT, a STATUSTEXT) and are still waiting
+        for their last samples; returns their ``(data time [s], record)``."""
+        out = []
+        for tp in list(self.closing):
+            if t_s >= tp.end_s + CLOSE_WAIT_S:
+                out += self._close(tp)
         return out
 
     def finish(self, t_end_s: float | None = None) -> list[tuple[float, dict]]:
