@@ -202,3 +202,103 @@ def test_replay_of_each_recording_reproduces_its_test_points_verdicts_and_alerts
     assert rep["verdicts"] == live["verdicts"]
     assert [x for x in rep["alerts"] if x.get("kind") != "link"] == \
         [x for x in live["alerts"] if x.get("kind") != "link"]
+
+
+# -- the parts of the log without telemetry ------------------------------------------------------
+# The shared log holds the rate-loop and attitude messages from 30.2 s to 97.2 s after its first
+# stamp only, but the autopilot's texts of the whole flight (four SystemID runs). Two more runs,
+# faster than real time (their timing checks hold on the receive clock, which the map uses):
+#
+# * ``before_data``: log seconds 5-35 at 4x: the map finds nothing for its first 6 s of receive time.
+# * ``no_data``: log seconds 80-195 at 10x: the roll chirp's end, then the pitch run's texts
+#   ("SystemID Starting: axis=8" ... "Finished") with no telemetry between them.
+DATA_FROM_S = 30.18792                 # the first ATT/PIDR/RATE after the log's first stamp [s]
+
+
+@pytest.fixture(scope="module")
+def quiet_runs(tmp_path_factory):
+    if not SID7.is_file():
+        pytest.skip(f"third-party log not found: {SID7}")
+    tmp = tmp_path_factory.mktemp("live_ardupilot_quiet")
+    names = ("before_data", "no_data")
+    monitors = {n: _monitor(tmp / f"{n}.mcap") for n in names}
+    streams = [_livesweep("stream", str(SID7), "--mavlink", f"udpout:127.0.0.1:{monitors['before_data'][1]}",
+                          "--start-s", "5", "--end-s", "35", "--rate-hz", "50", "--speed", "4"),
+               _livesweep("stream", str(SID7), "--mavlink", f"udpout:127.0.0.1:{monitors['no_data'][1]}",
+                          "--start-s", "80", "--end-s", "195", "--rate-hz", "50", "--speed", "10")]
+    summaries = {}
+    try:
+        for s in streams:
+            _, err = s.communicate(timeout=120)
+            assert s.returncode == 0, err
+        time.sleep(1.0)
+        for n, (mon, _) in monitors.items():
+            mon.send_signal(signal.SIGINT)
+            out, err = mon.communicate(timeout=60)
+            assert mon.returncode == 0, err
+            summaries[n] = (out, err)
+    finally:
+        for p in [*streams, *(m for m, _ in monitors.values())]:
+            if p.poll() is None:
+                p.kill()
+    return {n: {**_results(tmp / f"{n}.mcap"), "summary": summaries[n], "path": tmp / f"{n}.mcap"} for n in names}
+
+
+def test_a_map_missing_its_messages_says_so_then_says_when_they_come(quiet_runs):
+    """Before the vehicle streams its rate loops the map finds nothing, and says so 5 s after the
+    first frame; when they come it says that too (the early warning does not stand)."""
+    res = quiet_runs["before_data"]
+    path = res["path"]
+    maps = [(m.log_time_ns * 1e-9, m.data["message"]) for m in read_messages(path, topics="/livesweep/alert")
+            if m.data["kind"] == "map"]
+    first_rx = min(m.log_time_ns for m in read_messages(path) if m.topic.startswith("/mavlink/")) * 1e-9
+    data_rx = min(m.log_time_ns for m in read_messages(path, topics="/mavlink/PID_TUNING")) * 1e-9
+    assert data_rx - first_rx == pytest.approx((DATA_FROM_S - 5.0) / 4, abs=0.5)   # sent at 4x
+    missing = [(t, x) for t, x in maps if "no frames on" in x]
+    found = [(t, x) for t, x in maps if "found now" in x]
+    names = {"roll", "pitch", "yaw", "p", "q", "r", "phi", "theta"}
+    assert {x.split(":")[0].removeprefix("signal ") for _, x in missing} == names
+    assert all(t - first_rx == pytest.approx(5.0, abs=0.5) for t, _ in missing)
+    assert all("(topics seen: /mavlink/HEARTBEAT)" in x for _, x in missing)      # all the log has then
+    assert {x.split(":")[0].removeprefix("signal ") for _, x in found} == names
+    assert all(0 <= t - data_rx < 0.5 for t, _ in found)
+    assert found[-1][1].endswith("found now (every signal found)")
+    assert "no frames on" in res["summary"][1] and "found now" in res["summary"][1]
+
+
+def test_a_test_point_without_telemetry_is_judged_no_go_soon_after_its_end(quiet_runs):
+    """The pitch run's texts with no samples between them: a test point, NO-GO for want of samples,
+    recorded about CLOSE_WAIT_S after the autopilot's "SystemID Finished" (not at the monitor's
+    stop: the judgement must not wait for data that never comes)."""
+    from livesweep.monitor.testpoints import CLOSE_WAIT_S
+
+    res = quiet_runs["no_data"]
+    (tp,) = [x for x in res["test_points"] if x["swept_input"] == "pitch"]
+    assert (tp["source"], tp["verdict"]) == ("autopilot", "NO-GO")
+    assert any("no samples" in m for m in tp["missing"])
+    (logged,) = [t for t, x in zip(res["tp_logged_ns"], res["test_points"]) if x is tp or x == tp]
+    t_end = next(t for t, d in res["texts"] if d["text"] == "SystemID Finished" and t > tp["start_s"])
+    assert abs(tp["end_s"] - t_end) < 0.1
+    assert CLOSE_WAIT_S - 0.5 <= logged * 1e-9 - t_end <= CLOSE_WAIT_S + 1.5
+    assert res["verdicts"][-1]["verdict"] == "NO-GO"
+
+
+@pytest.mark.parametrize("name", ["before_data", "no_data"])
+def test_replay_reproduces_the_map_alerts_and_the_judgement_without_data(quiet_runs, name, tmp_path):
+    """The map alerts and the test point judged without samples come back identical in a replay."""
+    from livesweep.cli import _recorded_settings
+    from livesweep.monitor.pipeline import MonitorPipeline
+    from livesweep.telemetry.recorder import McapRecorder
+    from livesweep.telemetry.replay import McapReplaySource
+
+    live = quiet_runs[name]
+    out = tmp_path / "replay.mcap"
+    MonitorPipeline(_recorded_settings(str(live["path"])), [McapReplaySource(live["path"])],
+                    recorder=McapRecorder(out)).run()
+    rep = _results(out)
+    assert rep["test_points"] == live["test_points"]
+    assert rep["verdicts"] == live["verdicts"]
+    assert [x for x in rep["alerts"] if x.get("kind") != "link"] == \
+        [x for x in live["alerts"] if x.get("kind") != "link"]
+    if name == "before_data":
+        assert sum(x["kind"] == "map" for x in rep["alerts"]) == 16
