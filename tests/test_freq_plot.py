@@ -40,6 +40,25 @@ def test_reference_phase_recovers_a_wrapped_curve_through_noise():
     assert np.ptp((plain - truth)[coherent]) > 300.0
 
 
+def test_reference_phase_noise_coherent_by_chance_cannot_walk_the_curve_away():
+    """A short-window estimate past the sweep's reach: noise whose coherence crosses the threshold
+    at scattered bins (a real ArduPilot stream showed a p/roll phase walking to -1080 deg). The
+    solid coherent curve is kept exactly; every point past it stays within half a turn of its end."""
+    n = 400
+    truth = np.linspace(10.0, -200.0, 200)                       # the swept part: coherent
+    rng = np.random.default_rng(4)
+    measured = np.concatenate([_wrap(truth), rng.uniform(-180, 180, n - 200)])
+    coherent = np.concatenate([np.ones(200, bool), rng.random(n - 200) < 0.3])   # 30 % by chance
+    coherent[200] = False
+    out = reference_phase(measured, coherent)
+    np.testing.assert_allclose(out[:200], truth, atol=1e-9)
+    assert np.all(np.abs(out[200:] - out[199]) <= 180.0)
+    np.testing.assert_allclose(_wrap(out - measured), 0.0, atol=1e-9)       # the same phase modulo 360
+    # unwrapping the chance-coherent points among themselves walks (what this guards against)
+    walk = np.unwrap(measured[coherent], period=360.0)
+    assert np.ptp(walk) > 540.0
+
+
 def test_reference_phase_nan_and_shapes():
     p = np.array([[[190.0, 200.0, np.nan, 210.0], [np.nan] * 4]])
     out = reference_phase(p, np.array([[[False, True, True, True], [True] * 4]]))

@@ -34,7 +34,8 @@ SHRINK_RATIO = 1.6
 PAD_FRACTION = 0.15
 
 
-def reference_phase(phase_deg: np.ndarray, coherent: np.ndarray | None = None) -> np.ndarray:
+def reference_phase(phase_deg: np.ndarray, coherent: np.ndarray | None = None,
+                    min_run: int | None = None) -> np.ndarray:
     """Phase unwrapped along the last axis and shifted by a multiple of 360 deg.
 
     Parameters
@@ -42,12 +43,20 @@ def reference_phase(phase_deg: np.ndarray, coherent: np.ndarray | None = None) -
     phase_deg : array (..., n_f)
         Phase [deg], wrapped or unwrapped; NaN marks a missing value (skipped by the unwrap, kept NaN).
     coherent : bool array (..., n_f), optional
-        Where gamma^2 >= the threshold. The coherent points are unwrapped among themselves, so
-        the noise of a masked stretch between them cannot add turns to the coherent curve; each
-        masked point keeps its place in the unwrap of all finite points, moved by the turns that
-        join it to the coherent point before it (or after it, before the first one). The
-        reference point is the lowest-frequency coherent finite point; without one, the
-        lowest-frequency finite point.
+        Where gamma^2 >= the threshold. The points of coherent runs at least ``min_run`` long
+        are unwrapped among themselves, so the noise of a masked stretch between them cannot add
+        turns to the coherent curve; every other point (masked, or coherent by chance amid noise,
+        as short-window coherence often is) is put within half a turn of the solid coherent point
+        before it (or after it, before the first one), so noise cannot walk the curve away by
+        whole turns either. The reference point is the lowest-frequency solid coherent point;
+        without one, the lowest-frequency finite point.
+    min_run : int, optional
+        The shortest run of consecutive coherent finite points unwrapped as part of the curve;
+        default 5 % of the points (at least 3): short-window coherence of pure noise crosses 0.6
+        at a third of the bins, in runs of a few, while a response the sweep excited is coherent
+        over dozens of consecutive bins. A short island is then placed like a masked point, on
+        the branch nearest the curve, which is where the unwrap would have put it anyway unless
+        the phase turned by more than half a turn across it.
 
     Returns
     -------
@@ -66,18 +75,33 @@ def reference_phase(phase_deg: np.ndarray, coherent: np.ndarray | None = None) -
         v = row[idx]
         out = np.unwrap(v, period=360.0)
         cf = coh[k, idx]
+        if (solid := _solid(cf, min_run if min_run is not None else max(3, p.shape[-1] // 20))).any():
+            cf = solid
         if cf.any() and not cf.all():
-            u = out.copy()
             out[cf] = np.unwrap(v[cf], period=360.0)
             pos = np.arange(v.size)
             prev = np.maximum.accumulate(np.where(cf, pos, -1))
             nxt = np.minimum.accumulate(np.where(cf, pos, v.size)[::-1])[::-1]
-            anchor = np.where(prev >= 0, prev, nxt)[~cf]
-            out[~cf] = u[~cf] + 360.0 * np.round((out[anchor] - u[anchor]) / 360.0)
+            a = out[np.where(prev >= 0, prev, nxt)[~cf]]
+            out[~cf] = a + (v[~cf] - a + 180.0) % 360.0 - 180.0     # the branch nearest the anchor
         j = int(np.argmax(cf)) if cf.any() else 0
         out -= 360.0 * math.ceil((out[j] - 180.0) / 360.0)      # smallest n with out[j] - 360 n <= 180
         row[idx] = out
     return flat.reshape(p.shape)
+
+
+def _solid(coherent: np.ndarray, min_run: int) -> np.ndarray:
+    """``coherent`` without its runs shorter than ``min_run`` points."""
+    if min_run <= 1 or not coherent.any():
+        return coherent
+    c = np.concatenate(([False], coherent, [False])).astype(np.int8)
+    d = np.diff(c)
+    starts, stops = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    out = np.zeros_like(coherent)
+    for a, b in zip(starts, stops):
+        if b - a >= min_run:
+            out[a:b] = True
+    return out
 
 
 def masked_runs(y: np.ndarray, coherent: np.ndarray, y_range: tuple[float, float] | None = None
