@@ -81,6 +81,7 @@ def _results(path: Path) -> dict:
     texts = [(m.log_time_ns * 1e-9, m.data) for m in read_messages(path, topics="/mavlink/STATUSTEXT")]
     return {"test_points": data("/livesweep/test_point"), "verdicts": data("/livesweep/verdict"),
             "alerts": data("/livesweep/alert"), "texts": texts,
+            "estimate_verdicts": [(e["t_s"], e["verdict"], e["reasons"]) for e in data("/livesweep/estimate")],
             "tp_logged_ns": [m.log_time_ns for m in read_messages(path, topics="/livesweep/test_point")]}
 
 
@@ -202,6 +203,8 @@ def test_replay_of_each_recording_reproduces_its_test_points_verdicts_and_alerts
     assert rep["verdicts"] == live["verdicts"]
     assert [x for x in rep["alerts"] if x.get("kind") != "link"] == \
         [x for x in live["alerts"] if x.get("kind") != "link"]
+    # and each recorded estimate carries the verdict of its own data time, as live
+    assert rep["estimate_verdicts"] and rep["estimate_verdicts"] == live["estimate_verdicts"]
 
 
 # -- the parts of the log without telemetry ------------------------------------------------------
@@ -300,5 +303,7 @@ def test_replay_reproduces_the_map_alerts_and_the_judgement_without_data(quiet_r
     assert rep["verdicts"] == live["verdicts"]
     assert [x for x in rep["alerts"] if x.get("kind") != "link"] == \
         [x for x in live["alerts"] if x.get("kind") != "link"]
+    # and each recorded estimate carries the verdict of its own data time, as live
+    assert rep["estimate_verdicts"] == live["estimate_verdicts"]
     if name == "before_data":
         assert sum(x["kind"] == "map" for x in rep["alerts"]) == 16

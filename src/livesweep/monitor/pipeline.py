@@ -541,13 +541,17 @@ class MonitorPipeline:
             skip = int(math.floor((block.t0_s - self._next_tick) / self.s.update_period_s))
             self._next_tick += skip * self.s.update_period_s
             self.totals.ticks_skipped += skip
-        # feed the estimator tick by tick so estimates depend on data time only
+        # feed the test points and the estimator tick by tick, so estimates, and the verdict shown
+        # with them, depend on data time only (a replay's long blocks must not show an estimate with
+        # a verdict judged later in its block)
         start = 0
         while start < n:
             # samples up to the tick; GRID_TOL: a tick on a sample stays on it whatever block it falls in
             k_tick = int(math.floor((self._next_tick - block.t0_s) * fs + GRID_TOL)) + 1
             stop = min(n, max(k_tick, start))
             if stop > start:
+                self._test_point_records(self.test_points.block(float(t[start]), block.values[:, start:stop],
+                                                                block.valid[start:stop], t[start:stop]))
                 self.estimator.update(block.values[:, start:stop], block.valid[start:stop])
                 for name in self.s.inputs:
                     tt, vv = self._recent[name]
