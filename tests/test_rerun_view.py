@@ -415,6 +415,34 @@ def test_test_point_history_is_bounded(tmp_path):
     assert [int(m) for m in re.findall(r"\*\*Test point (\d+)", last)] == [6, 5, 4]     # newest first, 3 kept
 
 
+def test_a_receive_time_clock_is_a_utc_timeline_and_text(tmp_path):
+    """Data times in seconds since the UNIX epoch (a receive-time map): flight_time is a timestamp
+    timeline (the axis reads as the clock, not 20 781 days) at the same nanoseconds, and the test
+    point reads in UTC clock time, checked against the standard library's calendar."""
+    import datetime
+
+    t0 = 1795531580.5                                   # 2026-11-24 14:46:20.5 UTC
+    utc = datetime.datetime.fromtimestamp(t0, datetime.timezone.utc)
+    t = t0 + np.arange(50) / 50.0
+    view = RerunView(["roll"], ["p"], save_path=tmp_path / "epoch.rrd")
+    try:
+        view.log_timeseries(t, ["roll", "p"], np.vstack([np.sin(t - t0), np.cos(t - t0)]), ["input", "output"],
+                            units=["deg/s", "deg/s"])
+        view.log_test_point(t0 + 50.0, {"state": "closed", "start_s": t0, "end_s": t0 + 50.0, "source": "autopilot",
+                                        "swept_input": "roll", "verdict": "GO", "pairs": [], "missing": []})
+    finally:
+        view.close()
+    chunks = RrdReader(tmp_path / "epoch.rrd").stream().to_chunks()
+    types = {str(c.to_record_batch().schema.field("flight_time").type) for c in chunks
+             if "flight_time" in c.to_record_batch().schema.names}
+    assert types and all(ty.startswith("timestamp") for ty in types), types
+    rows = _rows(chunks, telemetry_path("input", "roll"), "Scalars:scalars")
+    np.testing.assert_array_equal([r[0] for r in rows], _ns(t))
+    doc = _rows(chunks, TEST_POINTS_PATH, "TextDocument:text")[-1][1][0]
+    want = f"{utc:%H:%M:%S}.{utc.microsecond // 100_000} UTC"
+    assert want == "14:46:20.5 UTC" and f"{want} – " in doc and "(50 s)" in doc, doc
+
+
 def test_rrd_has_blueprint_and_verifies(recorded):
     reader = RrdReader(recorded["path"])
     (rec,) = reader.recordings()

@@ -37,6 +37,7 @@ import numpy as np
 from livesweep.errors import ConfigError
 from livesweep.monitor.ingest import FrameQueue, Ingest
 from livesweep.monitor.testpoints import CLOSE_WAIT_S, GRID_TOL, SOURCES, TestPointTracker
+from livesweep.monitor.text import time_text
 from livesweep.spectral.excitation import Alert, ExcitationMonitor
 from livesweep.spectral.online import OnlineSpectralEstimator
 from livesweep.telemetry.align import GridAligner
@@ -469,7 +470,7 @@ class MonitorPipeline:
                 # the final judgement is a data tick away: the running verdict holds until it comes
                 # (no GO -> WAIT -> GO flicker on the operator's screen and in the recording)
                 rec = tracker.closing[-1].record("open")
-                return self.verdict or "WAIT", (f"test point ended at {tracker.closing[-1].end_s:.1f} s: judging",), rec
+                return self.verdict or "WAIT", (f"test point ended at {time_text(tracker.closing[-1].end_s)}: judging",), rec
             elif tracker.closed:
                 rec = tracker.closed[-1]
             else:
@@ -477,11 +478,11 @@ class MonitorPipeline:
                                 "marker",), None
         who = f"{rec['swept_input'] or 'an input'} swept"
         if rec["state"] == "open":
-            who += f" since {rec['start_s']:.1f} s ({rec['source']})"
+            who += f" since {time_text(rec['start_s'])} ({rec['source']})"
             if rec["verdict"] == "GO":
                 return "GO", (f"test point running, enough already: {who}", *rec["reasons"]), rec
             return "WAIT", (f"test point running: {who}", *rec["missing"]), rec
-        return rec["verdict"], (f"last test point ({who} {rec['start_s']:.1f}-{rec['end_s']:.1f} s): "
+        return rec["verdict"], (f"last test point ({who} {time_text(rec['start_s'])} - {time_text(rec['end_s'])}): "
                                 f"{rec['verdict']}", *rec["reasons"], *rec["missing"]), rec
 
     def _update_verdict(self, t_s: float, rec: dict | None = None) -> None:
@@ -531,7 +532,6 @@ class MonitorPipeline:
             self._ts_buffer.append((t, block.values))
         if self.verdict is None:
             self._update_verdict(block.t0_s)
-        self._test_point_records(self.test_points.block(block.t0_s, block.values, block.valid, t))
         if self._next_tick is None:
             self._next_tick = block.t0_s + self.s.update_period_s
             self._t_first = block.t0_s

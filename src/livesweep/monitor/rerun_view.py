@@ -3,8 +3,10 @@
 What the engineer sees, and how each item is represented (entity paths: :mod:`.blueprint`):
 
 * **Time series** of inputs and outputs: ``rr.Scalars`` per signal, sent in blocks with
-  ``send_columns`` on the ``flight_time`` timeline (a duration; ``round(t_s * 1e9)`` ns). The
-  legend names carry the units (``"da [deg]"``).
+  ``send_columns`` on the ``flight_time`` timeline (a duration; ``round(t_s * 1e9)`` ns; a
+  timestamp when the data's clock is seconds since the UNIX epoch, as a receive-time map's is,
+  so the time axis reads as the UTC clock rather than 20 000 days). The legend names carry the
+  units (``"da [deg]"``).
 * **Frequency plots** per pair, all three against ``log10 omega`` with ticks at the 1-2-5 values
   labelled in rad/s: coherence gamma^2 (line and points, 0..1, the threshold 0.6 as an orange
   line), |H| [dB] and phase [deg]. Rerun has no log axis, so each is a ``rr.LineStrips2D`` whose
@@ -79,7 +81,7 @@ from livesweep.monitor.freq_plot import (
     MAG_STEPS_DB, PHASE_STEPS_DEG, frequency_extent, log_ticks, masked_runs, reference_phase, tick_label,
     value_extent,
 )
-from livesweep.monitor.text import adequacy_markdown, coherence_kind_text, markdown_test_points
+from livesweep.monitor.text import EPOCH_MIN_S, adequacy_markdown, coherence_kind_text, markdown_test_points
 from livesweep.spectral.adequacy import MIN_COHERENCE
 
 __all__ = ["RerunView", "find_rerun_cli", "series_label", "adequacy_markdown"]
@@ -405,6 +407,7 @@ class RerunView:
         self._sweep_inputs: set[str] = set()
         self._test_points: dict[tuple, tuple[int, dict]] = {}   # (start_s, swept_input) -> (number, record)
         self._n_test_points = 0
+        self._epoch: bool | None = None       # flight_time as a UNIX timestamp (decided by the first time)
 
         self.rec = rr.RecordingStream(application_id, recording_id=recording_id)
         self.rec.set_log_time_enabled(False)   # flight_time is the only timeline: replay == live
@@ -563,11 +566,21 @@ class RerunView:
                    DCB(_Arrow(pa.array(radii)), self._d_strip_radii)]
         self.rec.log(plot.path, batches + (extra or []))
 
+    def _is_epoch(self, t_s: float) -> bool:
+        """Whether flight_time is a timestamp: decided by the first time logged, kept after (a
+        timeline has one type)."""
+        if self._epoch is None:
+            self._epoch = abs(float(t_s)) >= EPOCH_MIN_S
+        return self._epoch
+
     def _set_time(self, t_s: float) -> None:
         t = float(t_s)
         if not math.isfinite(t):
             raise ValueError(f"flight time must be finite, got {t_s!r}")
-        self.rec.set_time(TIMELINE, duration=np.timedelta64(int(_ns(t)), "ns"))
+        if self._is_epoch(t):
+            self.rec.set_time(TIMELINE, timestamp=np.datetime64(int(_ns(t)), "ns"))
+        else:
+            self.rec.set_time(TIMELINE, duration=np.timedelta64(int(_ns(t)), "ns"))
 
     # ---------------------------------------------------------------- public API
 
@@ -610,7 +623,8 @@ class RerunView:
             if not np.all(np.isfinite(t)):
                 bad = int(np.flatnonzero(~np.isfinite(t))[0])
                 raise ValueError(f"t_s[{bad}] = {t[bad]!r} is not a finite flight time")
-            times = rr.TimeColumn(TIMELINE, duration=_ns(t).astype("timedelta64[ns]"))
+            times = (rr.TimeColumn(TIMELINE, timestamp=_ns(t).astype("datetime64[ns]")) if self._is_epoch(t[0])
+                     else rr.TimeColumn(TIMELINE, duration=_ns(t).astype("timedelta64[ns]")))
             for path, row in zip(paths, v):
                 col = rr.ComponentColumn(self._d_scalars, _Arrow(pa.array(row)))
                 self.rec.send_columns(path, indexes=[times], columns=[col])

@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from livesweep.numbers import percent
 from livesweep.spectral.adequacy import MIN_COHERENCE, REQUIRED_FRACTION
 
-__all__ = ["percent", "band_text", "duration_text", "md_cell", "md_table", "omega_text", "sweep_text",
+__all__ = ["percent", "band_text", "duration_text", "time_text", "EPOCH_MIN_S", "md_cell", "md_table", "omega_text", "sweep_text",
            "coherence_kind_text", "adequacy_markdown", "markdown_test_points", "COHERENCE_KINDS",
            "DEFAULT_REQUIRED_FRACTION"]
 
@@ -54,6 +54,24 @@ def duration_text(seconds: float | None, *, missing: str = "unknown") -> str:
     if m < 60:
         return f"{m} min {int(round(s)) % 60:02d} s"
     return f"{m // 60} h {m % 60:02d} min"
+
+
+#: A data time at least this large is seconds since the UNIX epoch (a receive-time map, a vehicle
+#: on GPS time), not since boot [s]: 1e8 s is 1973, more than three years of uptime.
+EPOCH_MIN_S = 1e8
+
+
+def time_text(t_s: float | None, *, missing: str = "unknown") -> str:
+    """A data time as an operator reads it: ``"123.4 s"`` since boot, or the UTC clock time
+    ``"14:46:39.6 UTC"`` for seconds since the UNIX epoch (:data:`EPOCH_MIN_S`)."""
+    if not _finite(t_s):
+        return missing
+    t = float(t_s)
+    if abs(t) < EPOCH_MIN_S:
+        return f"{t:.1f} s"
+    tenths = int(round(t * 10.0))
+    sec = (tenths // 10) % 86400
+    return f"{sec // 3600:02d}:{sec // 60 % 60:02d}:{sec % 60:02d}.{tenths % 10} UTC"
 
 
 def md_cell(s) -> str:
@@ -137,7 +155,7 @@ def adequacy_markdown(t_s: float, rows: Sequence[dict], verdict: str, reasons: S
     required_fraction : float
         Threshold of the row verdicts; fractions are printed with :func:`percent` against it.
     """
-    lines = [f"**Verdict: {md_cell(verdict)}**  (flight time {float(t_s):.1f} s)", "",
+    lines = [f"**Verdict: {md_cell(verdict)}**  (flight time {time_text(t_s)})", "",
              f"Coherence judged: **{coherence_kind_text(coherence_kind)}**, threshold γ² ≥ {MIN_COHERENCE:g}", ""]
     if sweep:
         lines += [f"- {md_cell(sweep_text(name, *v))}" for name, v in sweep.items()] + [""]
@@ -189,9 +207,11 @@ def _tp_section(number: int, tp: dict, t_s: float) -> list[str]:
     if start is None:
         when = "start unknown"
     elif end is None:
-        when = f"from {start:.1f} s, {duration_text(float(t_s) - start)} so far"
+        when = f"from {time_text(start)}, {duration_text(float(t_s) - start)} so far"
     else:
-        when = f"{start:.1f} – {end:.1f} s ({duration_text(end - start)})"
+        span = (f"{start:.1f} – {end:.1f} s" if max(abs(start), abs(end)) < EPOCH_MIN_S
+                else f"{time_text(start)} – {time_text(end)}")
+        when = f"{span} ({duration_text(end - start)})"
     head = (f"**Test point {number} ({md_cell(state)}): {md_cell(tp.get('verdict') or '?')}**, sweeping "
             f"{md_cell(swept)}, {when}, found by {md_cell(tp.get('source') or '?')}")
     required = _num(tp.get("required_fraction"))
