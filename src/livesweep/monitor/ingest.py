@@ -123,7 +123,7 @@ class Ingest(threading.Thread):
         self._verdicts: dict[str, bool] = {}     # topic -> wanted (decided once per topic)
         self.drain_timeout_s = float(drain_timeout_s)
         self.received = 0          # frames read from the sources (all recorded, when recording)
-        self.topics_seen: dict = {}  # topic -> (frames, the first frame's data): what a map can match
+        self._topics: set[str] = set()  # topics read so far (the first frame of each goes to the analysis)
         self.drained = 0           # of which read while draining at stop
         self.error: BaseException | None = None
         self._stop_event = threading.Event()
@@ -149,15 +149,12 @@ class Ingest(threading.Thread):
         if self.recorder is not None:
             self.recorder.record(frames)
         self.received += len(frames)
-        seen = self.topics_seen
+        seen = self._topics
         first = None
         for f in frames:
-            entry = seen.get(f.topic)
-            if entry is None:
-                seen[f.topic] = (1, f.data)
+            if f.topic not in seen:
+                seen.add(f.topic)
                 first = (first or set()) | {id(f)}
-            else:
-                seen[f.topic] = (entry[0] + 1, entry[1])
         if self.wanted is not None:
             # and the first frame of every other topic: the analysis names what the link carries
             # when a map finds nothing, from the frames it took (so a replay names the same)
