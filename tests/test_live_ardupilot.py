@@ -117,6 +117,17 @@ def runs(tmp_path_factory):
     return {n: {**_results(tmp / f"{n}.mcap"), "summary": summaries[n], "path": tmp / f"{n}.mcap"} for n in names}
 
 
+def _replay(path: Path, out: Path) -> dict:
+    """What a replay of ``path`` with its recorded settings records (the library's own replay path)."""
+    from livesweep.cli import _recorded_settings
+    from livesweep.monitor.pipeline import MonitorPipeline
+    from livesweep.telemetry.recorder import McapRecorder
+    from livesweep.telemetry.replay import McapReplaySource
+
+    MonitorPipeline(_recorded_settings(str(path)), [McapReplaySource(path)], recorder=McapRecorder(out)).run()
+    return _results(out)
+
+
 def _text_time(res: dict, text: str) -> float:
     return next(t for t, d in res["texts"] if d["text"] == text)
 
@@ -189,16 +200,8 @@ def test_a_second_vehicle_on_the_link_changes_no_test_point(runs):
 def test_replay_of_each_recording_reproduces_its_test_points_verdicts_and_alerts(runs, name, tmp_path):
     """The recording's own settings, replayed: the same records, equal to the last digit (the link's
     own alerts aside: a file has no link)."""
-    from livesweep.cli import _recorded_settings
-    from livesweep.monitor.pipeline import MonitorPipeline
-    from livesweep.telemetry.recorder import McapRecorder
-    from livesweep.telemetry.replay import McapReplaySource
-
     live = runs[name]
-    out = tmp_path / "replay.mcap"
-    MonitorPipeline(_recorded_settings(str(live["path"])), [McapReplaySource(live["path"])],
-                    recorder=McapRecorder(out)).run()
-    rep = _results(out)
+    rep = _replay(live["path"], tmp_path / "replay.mcap")
     assert rep["test_points"] == live["test_points"]
     assert rep["verdicts"] == live["verdicts"]
     assert [x for x in rep["alerts"] if x.get("kind") != "link"] == \
@@ -289,16 +292,8 @@ def test_a_test_point_without_telemetry_is_judged_no_go_soon_after_its_end(quiet
 @pytest.mark.parametrize("name", ["before_data", "no_data"])
 def test_replay_reproduces_the_map_alerts_and_the_judgement_without_data(quiet_runs, name, tmp_path):
     """The map alerts and the test point judged without samples come back identical in a replay."""
-    from livesweep.cli import _recorded_settings
-    from livesweep.monitor.pipeline import MonitorPipeline
-    from livesweep.telemetry.recorder import McapRecorder
-    from livesweep.telemetry.replay import McapReplaySource
-
     live = quiet_runs[name]
-    out = tmp_path / "replay.mcap"
-    MonitorPipeline(_recorded_settings(str(live["path"])), [McapReplaySource(live["path"])],
-                    recorder=McapRecorder(out)).run()
-    rep = _results(out)
+    rep = _replay(live["path"], tmp_path / "replay.mcap")
     assert rep["test_points"] == live["test_points"]
     assert rep["verdicts"] == live["verdicts"]
     assert [x for x in rep["alerts"] if x.get("kind") != "link"] == \
