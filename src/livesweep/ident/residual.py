@@ -740,7 +740,7 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
         ss_before = _whitened_ss(before)
         cands = diagnose(table, fit, pairs, frs, kinds=kinds, residuals=before)
         strong = [c for c in cands if c.evidence >= min_evidence[c.kind]]
-        tried, best = [], None
+        tried, best, accepted = [], None, []
         if len(steps) < max_steps:
             seen = set()
             for c in strong:
@@ -754,8 +754,9 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                 rec, new = _try(table, c, fit, pairs, frs, verify, ss_before, ver, min_evidence)
                 n_fits += 1
                 tried.append(rec)
-                if rec["accepted"] and (best is None or rec["cost_after"] < best[0]["cost_after"]):
-                    best = (rec, new)
+                if rec["accepted"]:
+                    accepted.append((rec, new))
+            best = _choose(accepted, min_evidence)
             # An accepted candidate that explains less than half of what the best-explaining one
             # does (even if that one failed a guideline) is a partial explanation, not the effect.
             top = max((t.get("evidence_after", -np.inf) for t in tried), default=-np.inf)
@@ -771,6 +772,8 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
             break
         rec, (table, fit, ver_after, after) = best
         effect = {"kind": rec["kind"], "where": rec["where"], "parameters": rec["parameters"]}
+        if rec.get("ambiguous_with"):
+            effect["ambiguous_with"] = rec["ambiguous_with"]
         steps.append(LoopStep(tuple(cands), tuple(tried), effect, rec["cost_before"], rec["cost_after"],
                               _ver_summary(ver), _ver_summary(ver_after), before, after))
         ver, before = ver_after, after
@@ -779,12 +782,44 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
             unexplained.append({"pair": f"{r.output}/{r.input}", "rms_noise_units": round(r.rms_noise_units, 2)})
     added = [s.effect for s in steps if s.effect is not None]
     if added:
-        conclusion = "added " + "; ".join(f"{e['kind']} at {e['where']}" for e in added)
+        conclusion = "added " + "; ".join(
+            f"{e['kind']} at {e['where']}" + "".join(f" (hard to tell from {a['kind']} at {a['where']} in this band)"
+                                                      for a in e.get("ambiguous_with", ()))
+            for e in added)
     elif steps and any(c.evidence >= min_evidence[c.kind] for c in steps[-1].candidates):
         conclusion = "residual above noise, but no candidate effect passed the acceptance tests"
     else:
         conclusion = "nothing to add: residual within noise"
     return ResidualLoop(tuple(steps), table, fit, tuple(unexplained), conclusion, n_fits)
+
+
+def _choose(accepted, min_evidence):
+    """The effect to add among the accepted ``(record, result)``: the lowest cost, unless a simpler
+    one (fewer new parameters, fixed ones included) explains nearly as much, i.e. the whitened
+    residual of the better one is lower by less than the noise threshold of its kind (what an
+    effect of that kind picks up from noise alone on clean data): then the simpler one, as
+    CIFER practice prefers the simplest structure the data support (a delay before a second-order
+    actuator, a first-order before a second-order one). Candidates within that margin of the
+    chosen one are listed in its record's ``ambiguous_with``: hard to tell apart in this band."""
+    if not accepted:
+        return None
+    def size(a):
+        return len(a[0]["parameters"])
+    best = min(accepted, key=lambda a: a[0]["cost_after"])
+    margin = min_evidence[best[0]["kind"]]
+    near = [a for a in accepted if a[0]["evidence_after"] >= best[0]["evidence_after"] - margin]
+    chosen = min(near, key=lambda a: (size(a), -a[0]["evidence_after"]))
+    rec = chosen[0]
+    rec["ambiguous_with"] = [
+        {"kind": a[0]["kind"], "where": a[0]["where"], "evidence_after": a[0]["evidence_after"],
+         "cost_after": a[0]["cost_after"], "parameters": a[0]["parameters"]}
+        for a in near if a is not chosen
+        and a[0]["evidence_after"] >= rec["evidence_after"] - min_evidence[a[0]["kind"]]]
+    if chosen is not best:
+        rec["reason"] += (f"; preferred to {best[0]['kind']} at {best[0]['where']} (whitened residual lower by only "
+                          f"{best[0]['evidence_after'] - rec['evidence_after']:.0f} < {margin:g}, with "
+                          f"{size(best) - size(chosen)} more parameter(s))")
+    return chosen
 
 
 def _as_list(v):
