@@ -272,3 +272,100 @@ def test_a_candidate_that_diverges_in_verification_counts_as_worse():
     assert not np.isfinite(diverging.j_rms)
     assert _verification_change(stable, diverging)["verdict"] == "worse"
     assert _verification_change(stable, stable)["verdict"] == "unchanged"
+
+
+# --- acceptance as CIFER practice does it ------------------------------------------------------
+
+def test_a_sharp_mode_with_a_poorly_determined_damping_is_added_with_the_damping_fixed():
+    """The structural mode the loop used to reject (pole damping 0.05, zero damping 0.15, +9.5 dB at
+    12 rad/s on p): its damping comes out at CR ~20.4 % > 20 %. The shape is plain, so the damping
+    is fixed where the fit put it (structure reduction inside the effect) and the mode is added;
+    the record says what was fixed and why. Seed 13 (the rule was written looking at seeds 11-12)."""
+    from livesweep.ident.residual import CLEAR_EVIDENCE_FACTOR
+
+    zeta, gain = 0.05, 2.0
+    assert 20 * math.log10(1 + gain) == pytest.approx(9.5, abs=0.05)       # the issue's +9.5 dB peak
+    loop = _loop([make_effect("structural_mode", output="p", omega_rad_s=12.0, zeta=zeta, gain=gain)], seed=13)
+    first = loop.steps[0]
+    assert first.effect is not None and (first.effect["kind"], first.effect["where"]) == ("structural_mode", "p")
+    (rec,) = [t for t in first.tried if t["kind"] == "structural_mode"]
+    (fixed,) = rec["fixed"]
+    assert fixed["name"] == "zeta_mode_p" and fixed["cramer_rao_pct"] > 20
+    assert "zeta_mode_p fixed at" in rec["reason"]
+    assert rec["evidence_after"] >= CLEAR_EVIDENCE_FACTOR * MIN_EVIDENCE["structural_mode"]
+    # the fixed damping within 3 of the Cramer-Rao bounds it had when it was fixed
+    assert abs(fixed["value"] - zeta) <= 3 * fixed["cramer_rao_pct"] / 100 * fixed["value"]
+    params = {p["name"]: p for p in first.effect["parameters"]}
+    assert params["zeta_mode_p"]["fixed"] and not params["w_mode_p"]["fixed"] and not params["g_mode_p"]["fixed"]
+    for name, truth in (("w_mode_p", 12.0), ("g_mode_p", gain)):
+        p = params[name]
+        assert p["cramer_rao_pct"] <= 20 and p["insensitivity_pct"] <= 10
+        assert abs(p["value"] - truth) <= 3 * p["cramer_rao_pct"] / 100 * abs(p["value"]), (p, truth)
+    assert loop.fit.cost_average <= 0.5 * first.cost_before
+    assert loop.added == (first.effect,)
+
+
+@pytest.mark.parametrize("seed", [31, 32, 33])
+def test_a_notch_on_clean_hover_is_not_made_acceptable_by_fixing(seed):
+    """Clean hover data where a notch on da picks up some evidence (1.5-3 times its threshold) with
+    a poorly determined damping and depth: fixing is for effects that are clearly there, one
+    parameter at most, so it is rejected as before, not added with two of its three parameters
+    fixed. CLEAR_EVIDENCE_FACTOR was set looking at seed 31; 32 and 33 are held out."""
+    frs, table, fit = _hover([], seed=seed)
+    loop = run_residual_loop(table, fit, frs)
+    notch = [t for t in loop.steps[0].tried if t["kind"] == "notch_or_filter"]
+    assert notch and not notch[0]["accepted"] and notch[0]["fixed"] == []
+    assert all(e["kind"] != "notch_or_filter" for e in loop.added)
+
+
+def _hover(effects, seed):
+    """A hover test point (the pilot's loop closed in the simulator) with ``effects``, analysed; the
+    shipped hover case's model fitted to it."""
+    case = load_case("config/xv15_hover_lateral.toml")
+    table = copy.deepcopy(case.tables["state_space"])
+    sc = sweep_scenario("xv15-hover", axes=("da", "dr"), repeats=2, omega_min_rad_s=0.2, omega_max_rad_s=12.0,
+                        duration_s=100.0, amplitudes={"da": 1.5, "dr": 3.0}, off_axis_rms=0.2, seed=seed,
+                        effects=tuple(effects), turbulence_scale=0.5)
+    values, names = simulated_record(simulate(sc))
+    values = values - values.mean(axis=1, keepdims=True)
+    frs = analyze(values, names, 50.0, ["da", "dr"], list(table["outputs"]), (0.2, 12.0),
+                  windows_s=(10.0, 20.0, 40.0, 80.0, 160.0)).best
+    model = StateSpaceModel.from_table(table)
+    pairs, _ = select_pairs(frs, model)
+    return frs, table, fit_state_space(model, pairs)
+
+
+@pytest.mark.parametrize("seed, delay_s", [(34, 0.1), (22, 0.05)])
+def test_a_delay_in_hover_is_added_as_a_delay_and_nothing_patches_it(seed, delay_s):
+    """Hover, a pure delay on da: the one-parameter delay is what is added (not the two-parameter
+    actuator that scores nearly the same), within 3 Cramer-Rao bounds of the injection, the cost
+    at least halved, and no second effect is added to patch it."""
+    frs, table, fit = _hover([make_effect("time_delay", input="da", delay_s=delay_s)], seed=seed)
+    loop = run_residual_loop(table, fit, frs)
+    assert [(e["kind"], e["where"]) for e in loop.added] == [("time_delay", "da")]
+    (tau,) = loop.added[0]["parameters"]
+    assert abs(tau["value"] - delay_s) <= 3 * tau["cramer_rao_pct"] / 100 * tau["value"], tau
+    assert loop.fit.cost_average <= 0.5 * loop.steps[0].cost_before
+
+
+def test_a_near_tie_goes_to_the_simpler_effect_and_both_are_reported():
+    """The choice among accepted candidates: a second-order actuator lowering the whitened residual
+    by 93 more than a delay (the hover miss: 53 383 vs 53 290) has one more parameter than that is
+    worth (the noise threshold of its kind, 150): the delay is added, the actuator named beside it;
+    a clear winner (by 500) is taken even with more parameters."""
+    from livesweep.ident.residual import _choose
+
+    def rec(kind, evidence, n_par, cost):
+        return ({"kind": kind, "where": "da", "evidence_after": evidence, "cost_after": cost, "reason": "accepted",
+                 "parameters": [{"name": f"x{k}"} for k in range(n_par)]}, object())
+
+    delay, second = rec("time_delay", 53290.0, 1, 6.1), rec("actuator_second_order", 53383.0, 2, 6.0)
+    chosen = _choose([second, delay], MIN_EVIDENCE)
+    assert chosen is delay
+    assert [(a["kind"], a["evidence_after"]) for a in chosen[0]["ambiguous_with"]] == [("actuator_second_order", 53383.0)]
+    assert "preferred to actuator_second_order" in chosen[0]["reason"]
+    clear = rec("actuator_second_order", 53790.0, 2, 5.5)
+    delay2 = rec("time_delay", 53290.0, 1, 6.1)
+    assert _choose([delay2, clear], MIN_EVIDENCE) is clear
+    assert clear[0]["ambiguous_with"] == []
+    assert _choose([], MIN_EVIDENCE) is None

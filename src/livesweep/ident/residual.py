@@ -50,7 +50,8 @@ from livesweep.ident.accuracy import MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT
 from livesweep.ident.state_space import StateSpaceFit, StateSpaceModel, fit_state_space
 from livesweep.numbers import finite_or_none
 
-__all__ = ["KINDS", "MIN_EVIDENCE", "MIN_RELATIVE_COST_DROP", "PairResidual", "Candidate", "LoopStep",
+__all__ = ["KINDS", "MIN_EVIDENCE", "MIN_RELATIVE_COST_DROP", "FIXABLE_PREFIXES",
+           "FREQUENCY_PREFIXES", "CLEAR_EVIDENCE_FACTOR", "PairResidual", "Candidate", "LoopStep",
            "ResidualLoop", "pair_residuals", "diagnose", "augment_table", "run_residual_loop", "table_with_fit"]
 
 KINDS = ("time_delay", "actuator_lag", "actuator_second_order", "notch_or_filter", "structural_mode",
@@ -677,7 +678,7 @@ def _param_report(fit, names):
     for n in names:
         q = fit.parameter(n)
         out.append({"name": n, "value": float(q.value), "cramer_rao_pct": _finite(q.cramer_rao_pct),
-                    "insensitivity_pct": _finite(q.insensitivity_pct)})
+                    "insensitivity_pct": _finite(q.insensitivity_pct), "fixed": bool(q.fixed)})
     return out
 
 
@@ -873,9 +874,61 @@ def _verification_change(before, after):
             "verdict": verdict}
 
 
+def _guideline_failures(params) -> list[str]:
+    """The accuracy guidelines (CR% <= 20, I% <= 10) each free new parameter fails, as reasons."""
+    out = []
+    for p in params:
+        if p.get("fixed"):
+            continue
+        if p["cramer_rao_pct"] is None or p["cramer_rao_pct"] > MAX_CRAMER_RAO_PCT:
+            out.append(f"{p['name']} CR% {p['cramer_rao_pct']} > {MAX_CRAMER_RAO_PCT:g}")
+        if p["insensitivity_pct"] is None or p["insensitivity_pct"] > MAX_INSENSITIVITY_PCT:
+            out.append(f"{p['name']} I% {p['insensitivity_pct']} > {MAX_INSENSITIVITY_PCT:g}")
+    return out
+
+
+#: An effect whose parameter is fixed must be clearly there: its whitened residual drop at least
+#: this many times its kind's noise threshold (20 times the largest drop seen on clean cruise logs;
+#: a sharp mode with a poorly determined damping drops it 60 times the threshold, a notch fitted
+#: to clean hover noise 1.7 times). At most one parameter is fixed per effect.
+CLEAR_EVIDENCE_FACTOR = 10.0
+#: Parameters of an effect that may be fixed at their fitted value when poorly determined: the
+#: shape parameters (a damping, a notch's depth or a mode's gain), never the frequency or the delay
+#: that places the effect (a frequency that is not determined means the effect is not there).
+FIXABLE_PREFIXES = ("zeta_", "g_")
+#: Parameters that place an effect in frequency [rad/s]: fixing another of its parameters needs
+#: this one inside the fitted band (a "notch" at 25 rad/s fitted to 0.3-20 rad/s data is a lag in
+#: disguise, not a notch whose depth the data could not pin down).
+FREQUENCY_PREFIXES = ("w_", "wn_")
+
+
+def _worst(params):
+    """The fixable free parameter that misses the guidelines by most (relative to its limit), or
+    None (also when a parameter that places the effect misses them: then nothing is fixed)."""
+    def excess(p):
+        cr, ins = p["cramer_rao_pct"], p["insensitivity_pct"]
+        return max(math.inf if cr is None else cr / MAX_CRAMER_RAO_PCT,
+                   math.inf if ins is None else ins / MAX_INSENSITIVITY_PCT)
+    bad = [p for p in params if not p.get("fixed") and excess(p) > 1.0]
+    if not bad or not all(p["name"].startswith(FIXABLE_PREFIXES) for p in bad):
+        return None
+    return max(bad, key=excess)
+
+
 def _try(table, cand, fit, pairs, frs, verify, ss_before, ver_before, min_evidence):
+    """Re-identify with ``cand`` added and judge it; returns (record, (table, fit, verification,
+    residuals)) with the record's ``accepted`` and ``reason``.
+
+    When the effect's shape is supported (the fit converges, the whitened residual and J_ave fall
+    beyond noise, verification is not worse) but one of its parameters misses the accuracy
+    guidelines (a sharp mode's damping, a notch's depth), the structure-reduction step of the
+    method is taken inside the effect: that parameter (one, a shape parameter: a damping or a
+    gain) is fixed at its fitted value and the rest refitted, when the effect is clearly there
+    (:data:`CLEAR_EVIDENCE_FACTOR`) and another of its parameters stays free. The record
+    says which were fixed (``fixed``: name, value and why) and the effect is accepted with them.
+    """
     rec = {"kind": cand.kind, "where": cand.where, "evidence": round(float(cand.evidence), 2),
-           "cost_before": float(fit.cost_average)}
+           "cost_before": float(fit.cost_average), "fixed": []}
     try:
         aug, new = augment_table(table, cand)
         model = StateSpaceModel.from_table(aug)
@@ -883,31 +936,52 @@ def _try(table, cand, fit, pairs, frs, verify, ss_before, ver_before, min_eviden
     except (ConfigError, np.linalg.LinAlgError, ValueError) as exc:
         rec.update(accepted=False, reason=f"could not re-identify: {exc}", cost_after=float("nan"), parameters=[])
         return rec, None
-    res_after = tuple(pair_residuals(new_fit.model, new_fit.theta, pairs, frs))
-    ss_after = _whitened_ss(res_after)
-    params = _param_report(new_fit, new)
-    ver_after = verify(new_fit.model, new_fit.theta) if verify else None
-    change = _verification_change(ver_before, ver_after)
+    while True:
+        res_after = tuple(pair_residuals(new_fit.model, new_fit.theta, pairs, frs))
+        ss_after = _whitened_ss(res_after)
+        params = _param_report(new_fit, new)
+        ver_after = verify(new_fit.model, new_fit.theta) if verify else None
+        change = _verification_change(ver_before, ver_after)
+        shape = []                                    # the effect's shape, whatever its parameters' accuracy
+        if not new_fit.converged:
+            shape.append("fit did not converge")
+        if ss_before - ss_after < min_evidence[cand.kind]:
+            shape.append(f"whitened residual fell by {ss_before - ss_after:.1f} < {min_evidence[cand.kind]:g} (noise)")
+        if new_fit.cost_average > (1 - MIN_RELATIVE_COST_DROP) * fit.cost_average:
+            shape.append(f"J_ave {fit.cost_average:.2f} -> {new_fit.cost_average:.2f} "
+                         f"(< {100 * MIN_RELATIVE_COST_DROP:.0f} % drop)")
+        if change is not None and change["verdict"] == "worse":
+            if change["mean_change"] is None:
+                shape.append(f"verification: the model diverges open loop (J_rms {change['j_rms_before']} -> not finite)")
+            else:
+                shape.append(f"verification J_rms {change['j_rms_before']:.4g} -> {change['j_rms_after']:.4g}: worse "
+                             f"beyond noise (mean squared-error change {change['mean_change']:.3g} > 2 x "
+                             f"{change['noise']:.3g})")
+        accuracy = _guideline_failures(params)
+        worst = _worst(params)
+        n_free = sum(not p.get("fixed") for p in params)
+        lo, hi = _band_of(pairs)
+        outside = any(p["name"].startswith(FREQUENCY_PREFIXES) and not lo <= p["value"] <= hi for p in params)
+        if (shape or not accuracy or worst is None or n_free <= 1 or rec["fixed"] or outside
+                or ss_before - ss_after < CLEAR_EVIDENCE_FACTOR * min_evidence[cand.kind]):
+            break
+        # the shape is there; one parameter is poorly determined: fix it where it is, refit the rest
+        try:
+            refit = fit_state_space(new_fit.model.with_values(new_fit.theta, fixed={worst["name"]: worst["value"]}),
+                                    pairs, max_nfev=100)
+        except (ConfigError, np.linalg.LinAlgError, ValueError):
+            break
+        why = (f"CR% {worst['cramer_rao_pct']}, I% {worst['insensitivity_pct']}: poorly determined, "
+               f"fixed at its fitted value")
+        rec["fixed"].append({"name": worst["name"], "value": float(worst["value"]),
+                             "cramer_rao_pct": worst["cramer_rao_pct"], "insensitivity_pct": worst["insensitivity_pct"],
+                             "reason": why})
+        new_fit = refit
     rec.update(cost_after=float(new_fit.cost_average), evidence_after=round(ss_before - ss_after, 2),
                parameters=params, verification_after=_ver_summary(ver_after), verification_change=change)
-    reasons = []
-    if not new_fit.converged:
-        reasons.append("fit did not converge")
-    if ss_before - ss_after < min_evidence[cand.kind]:
-        reasons.append(f"whitened residual fell by {ss_before - ss_after:.1f} < {min_evidence[cand.kind]:g} (noise)")
-    if new_fit.cost_average > (1 - MIN_RELATIVE_COST_DROP) * fit.cost_average:
-        reasons.append(f"J_ave {fit.cost_average:.2f} -> {new_fit.cost_average:.2f} (< {100 * MIN_RELATIVE_COST_DROP:.0f} % drop)")
-    for p in params:
-        if p["cramer_rao_pct"] is None or p["cramer_rao_pct"] > MAX_CRAMER_RAO_PCT:
-            reasons.append(f"{p['name']} CR% {p['cramer_rao_pct']} > {MAX_CRAMER_RAO_PCT:g}")
-        if p["insensitivity_pct"] is None or p["insensitivity_pct"] > MAX_INSENSITIVITY_PCT:
-            reasons.append(f"{p['name']} I% {p['insensitivity_pct']} > {MAX_INSENSITIVITY_PCT:g}")
-    if change is not None and change["verdict"] == "worse":
-        if change["mean_change"] is None:
-            reasons.append(f"verification: the model diverges open loop (J_rms {change['j_rms_before']} -> not finite)")
-        else:
-            reasons.append(f"verification J_rms {change['j_rms_before']:.4g} -> {change['j_rms_after']:.4g}: worse beyond "
-                           f"noise (mean squared-error change {change['mean_change']:.3g} > 2 x {change['noise']:.3g})")
+    reasons = shape + accuracy
     rec["accepted"] = not reasons
-    rec["reason"] = "; ".join(reasons) if reasons else "accepted"
+    rec["reason"] = "; ".join(reasons) if reasons else (
+        "accepted" + "".join(f"; {f['name']} fixed at {f['value']:.4g} ({f['reason'].split(':')[0]})"
+                             for f in rec["fixed"]))
     return rec, (table_with_fit(aug, new_fit), new_fit, ver_after, res_after)
