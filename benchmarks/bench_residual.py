@@ -25,7 +25,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from livesweep.config import load_case  # noqa: E402
-from livesweep.ident.residual import run_residual_loop  # noqa: E402
+from livesweep.ident.residual import effect_text, run_residual_loop  # noqa: E402
 from livesweep.ident.state_space import StateSpaceModel, fit_state_space, select_pairs  # noqa: E402
 from livesweep.ident.verify import verify  # noqa: E402
 from livesweep.sim.effects import parse_effect  # noqa: E402
@@ -77,9 +77,7 @@ def main(argv) -> None:
           f"{len(loop.steps)} steps: {loop.conclusion}")
     for st in loop.steps:
         if st.effect:
-            pars = ", ".join(f"{p['name']} = {p['value']:.4g} " + ("(fixed)" if p.get("fixed") else f"(CR {p['cramer_rao_pct']}%)")
-                             for p in st.effect["parameters"])
-            print(f"  + {st.effect['kind']} at {st.effect['where']}: {pars}; J_ave {st.cost_before:.2f} -> {st.cost_after:.2f}")
+            print(f"  + {effect_text(st.effect)}; J_ave {st.cost_before:.2f} -> {st.cost_after:.2f}")
     print(f"ratio loop / one fit: {t_loop / t_fit:.0f}x (target: a loop with two effects under 10 s on one core)")
 
 

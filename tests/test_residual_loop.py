@@ -303,6 +303,9 @@ def test_a_sharp_mode_with_a_poorly_determined_damping_is_added_with_the_damping
         assert abs(p["value"] - truth) <= 3 * p["cramer_rao_pct"] / 100 * abs(p["value"]), (p, truth)
     assert loop.fit.cost_average <= 0.5 * first.cost_before
     assert loop.added == (first.effect,)
+    from livesweep.ident.residual import effect_text
+
+    assert f"zeta_mode_p = {fixed['value']:.4g} (fixed: poorly determined)" in effect_text(first.effect)
 
 
 @pytest.mark.parametrize("seed", [31, 32, 33])

@@ -292,15 +292,15 @@ def _identify(args, case) -> int:
         print(f"  verification {label}: J_rms {v.j_rms:.3f}, TIC "
               + ", ".join(f"{o.name} {o.tic:.3f}" for o in v.outputs) + (": pass" if v.passed else ": FAIL"))
     if res is not None:
+        from livesweep.ident.residual import effect_text
+
         loop = res.loop
         print(f"  residual loop: {loop.conclusion} ({loop.n_fits} re-identifications)")
         for st in loop.steps:
             if st.effect is not None:
-                pars = ", ".join(f"{p['name']} = {p['value']:.4g} (CR {p['cramer_rao_pct']}%)" for p in st.effect["parameters"])
                 ver_txt = (f", verification J_rms {st.verification_before['j_rms']:.3f} -> {st.verification_after['j_rms']:.3f}"
                            if st.verification_before and st.verification_after else "")
-                print(f"    + {st.effect['kind']} at {st.effect['where']}: {pars}; J_ave {st.cost_before:.2f} -> "
-                      f"{st.cost_after:.2f}{ver_txt}")
+                print(f"    + {effect_text(st.effect)}; J_ave {st.cost_before:.2f} -> {st.cost_after:.2f}{ver_txt}")
     for note in dq["notes"]:
         print(f"  note: {note}")
     print(f"wrote {path} and {path.parent / 'report.html'}")

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from livesweep import __version__
 from livesweep.errors import ConfigError
+from livesweep.ident.residual import effect_text
 from livesweep.numbers import finite_or_none
 from livesweep.report.plots import bode_plot
 
@@ -318,7 +319,7 @@ def _html_parametric(report: dict) -> str:
             vb, va = st.get("verification_before"), st.get("verification_after")
             ver = (f"; verification J<sub>rms</sub> {vb['j_rms']:.3f} &rarr; {va['j_rms']:.3f}" if vb and va else "")
             if eff:
-                pars = ", ".join(f"{p['name']} = {p['value']:.4g} (CR {p['cramer_rao_pct']}%)" for p in eff["parameters"])
+                pars = effect_text(eff).split(": ", 1)[1]
                 head = f"added <b>{e(eff['kind'])}</b> at <b>{e(eff['where'])}</b>: {e(pars)}"
             else:
                 head = "nothing added"
