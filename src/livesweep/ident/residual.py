@@ -667,7 +667,13 @@ class ResidualLoop:
 
     @property
     def added(self) -> tuple:
-        return tuple(s.effect for s in self.steps if s.effect is not None)
+        """Every effect added, in order (the partners of a pair added together as their own entries)."""
+        out = []
+        for s in self.steps:
+            if s.effect is not None:
+                out.append({k: v for k, v in s.effect.items() if k != "with"})
+                out += list(s.effect.get("with", ()))
+        return tuple(out)
 
     def to_dict(self) -> dict:
         return {"steps": [s.to_dict() for s in self.steps], "unexplained": list(self.unexplained),
@@ -759,6 +765,20 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                 if rec["accepted"]:
                     accepted.append((rec, new))
             best = _choose(accepted, min_evidence)
+            leader = max(tried, key=lambda t: t.get("evidence_after", -np.inf), default=None)
+            if leader is not None and not leader["accepted"] and len(steps) + 2 <= max_steps:
+                # the best explanation fails alone: two effects may overlap (a mode and an actuator
+                # lag); try the strongest candidates in pairs at different places, each pair judged
+                # as one effect, and keep a pair only if it explains more than the best single one
+                # by more than the noise threshold of its second effect
+                duo = _pair_search(strong, table, fit, pairs, frs, verify, ss_before, ver, min_evidence, progress)
+                n_fits += len(duo)
+                tried += [rec for rec, _ in duo]
+                ok = [d for d in duo if d[0]["accepted"]]
+                pick = _choose(ok, min_evidence)
+                if pick is not None and (best is None or pick[0]["evidence_after"] >= best[0]["evidence_after"]
+                                         + min(min_evidence[w["kind"]] for w in pick[0]["with"])):
+                    best = pick
             # An accepted candidate that explains less than half of what the best-explaining one
             # does (even if that one failed a guideline) is a partial explanation, not the effect.
             top = max((t.get("evidence_after", -np.inf) for t in tried), default=-np.inf)
@@ -776,13 +796,15 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
         effect = {"kind": rec["kind"], "where": rec["where"], "parameters": rec["parameters"]}
         if rec.get("ambiguous_with"):
             effect["ambiguous_with"] = rec["ambiguous_with"]
+        if rec.get("with"):
+            effect["with"] = rec["with"]
         steps.append(LoopStep(tuple(cands), tuple(tried), effect, rec["cost_before"], rec["cost_after"],
                               _ver_summary(ver), _ver_summary(ver_after), before, after))
         ver, before = ver_after, after
     for r in before:                                  # the final fit's residual
         if r.rms_noise_units > 2.0:
             unexplained.append({"pair": f"{r.output}/{r.input}", "rms_noise_units": round(r.rms_noise_units, 2)})
-    added = [s.effect for s in steps if s.effect is not None]
+    added = [e for s in steps if s.effect is not None for e in (s.effect, *s.effect.get("with", ()))]
     if added:
         conclusion = "added " + "; ".join(
             f"{e['kind']} at {e['where']}" + "".join(f" (hard to tell from {a['kind']} at {a['where']} in this band)"
@@ -803,9 +825,35 @@ def effect_text(effect: dict) -> str:
             return f"{p['name']} = {p['value']:.4g} (fixed: poorly determined)"
         return f"{p['name']} = {p['value']:.4g} (CR {p['cramer_rao_pct']} %)"
     text = f"{effect['kind']} at {effect['where']}: " + ", ".join(par(p) for p in effect["parameters"])
+    for w in effect.get("with", ()):
+        text += f"; together with {w['kind']} at {w['where']}: " + ", ".join(par(p) for p in w["parameters"])
     for a in effect.get("ambiguous_with", ()):
         text += f"; hard to tell from {a['kind']} at {a['where']} in this band"
     return text
+
+
+#: Candidates (best evidence first, distinct kind and place) combined in pairs when the best one
+#: fails alone.
+N_PAIR = 4
+
+
+def _pair_search(strong, table, fit, pairs, frs, verify, ss_before, ver, min_evidence, progress):
+    """Re-identify the pairs of the :data:`N_PAIR` strongest distinct candidates at different places."""
+    top, seen = [], set()
+    for c in strong:
+        if (c.kind, c.where) not in seen and len(top) < N_PAIR:
+            seen.add((c.kind, c.where))
+            top.append(c)
+    out = []
+    for i, a in enumerate(top):
+        for b in top[i + 1:]:
+            if a.where == b.where:
+                continue
+            if progress:
+                progress(f"residual loop: re-identifying with {a.kind} at {a.where} and {b.kind} at {b.where}")
+            rec, new = _try(table, [a, b], fit, pairs, frs, verify, ss_before, ver, min_evidence)
+            out.append((rec, new))
+    return out
 
 
 def _choose(accepted, min_evidence):
@@ -819,7 +867,7 @@ def _choose(accepted, min_evidence):
     if not accepted:
         return None
     def size(a):
-        return len(a[0]["parameters"])
+        return len(a[0]["parameters"]) + sum(len(w["parameters"]) for w in a[0].get("with", ()))
     best = min(accepted, key=lambda a: a[0]["cost_after"])
     margin = min_evidence[best[0]["kind"]]
     near = [a for a in accepted if a[0]["evidence_after"] >= best[0]["evidence_after"] - margin]
@@ -930,8 +978,10 @@ def _worst(params):
 
 
 def _try(table, cand, fit, pairs, frs, verify, ss_before, ver_before, min_evidence):
-    """Re-identify with ``cand`` added and judge it; returns (record, (table, fit, verification,
-    residuals)) with the record's ``accepted`` and ``reason``.
+    """Re-identify with ``cand`` (a Candidate, or several added together) added and judge it;
+    returns (record, (table, fit, verification, residuals)) with the record's ``accepted`` and
+    ``reason``. Several candidates are judged as one effect whose noise threshold is the sum of
+    theirs; the record's ``with`` lists the others (kind, where, their parameters).
 
     When the effect's shape is supported (the fit converges, the whitened residual and J_ave fall
     beyond noise, verification is not worse) but one of its parameters misses the accuracy
@@ -941,10 +991,17 @@ def _try(table, cand, fit, pairs, frs, verify, ss_before, ver_before, min_eviden
     (:data:`CLEAR_EVIDENCE_FACTOR`) and another of its parameters stays free. The record
     says which were fixed (``fixed``: name, value and why) and the effect is accepted with them.
     """
-    rec = {"kind": cand.kind, "where": cand.where, "evidence": round(float(cand.evidence), 2),
+    cands = list(cand) if isinstance(cand, (list, tuple)) else [cand]
+    cand = cands[0]
+    threshold = sum(min_evidence[c.kind] for c in cands)
+    rec = {"kind": cand.kind, "where": cand.where, "evidence": round(float(sum(c.evidence for c in cands)), 2),
            "cost_before": float(fit.cost_average), "fixed": []}
     try:
-        aug, new = augment_table(table, cand)
+        aug, new, own = table, [], []
+        for c in cands:
+            aug, names = augment_table(aug, c)
+            new += names
+            own.append(names)
         model = StateSpaceModel.from_table(aug)
         new_fit = fit_state_space(model, pairs, max_nfev=100)
     except (ConfigError, np.linalg.LinAlgError, ValueError) as exc:
@@ -959,8 +1016,8 @@ def _try(table, cand, fit, pairs, frs, verify, ss_before, ver_before, min_eviden
         shape = []                                    # the effect's shape, whatever its parameters' accuracy
         if not new_fit.converged:
             shape.append("fit did not converge")
-        if ss_before - ss_after < min_evidence[cand.kind]:
-            shape.append(f"whitened residual fell by {ss_before - ss_after:.1f} < {min_evidence[cand.kind]:g} (noise)")
+        if ss_before - ss_after < threshold:
+            shape.append(f"whitened residual fell by {ss_before - ss_after:.1f} < {threshold:g} (noise)")
         if new_fit.cost_average > (1 - MIN_RELATIVE_COST_DROP) * fit.cost_average:
             shape.append(f"J_ave {fit.cost_average:.2f} -> {new_fit.cost_average:.2f} "
                          f"(< {100 * MIN_RELATIVE_COST_DROP:.0f} % drop)")
@@ -977,7 +1034,7 @@ def _try(table, cand, fit, pairs, frs, verify, ss_before, ver_before, min_eviden
         lo, hi = _band_of(pairs)
         outside = any(p["name"].startswith(FREQUENCY_PREFIXES) and not lo <= p["value"] <= hi for p in params)
         if (shape or not accuracy or worst is None or n_free <= 1 or rec["fixed"] or outside
-                or ss_before - ss_after < CLEAR_EVIDENCE_FACTOR * min_evidence[cand.kind]):
+                or ss_before - ss_after < CLEAR_EVIDENCE_FACTOR * threshold):
             break
         # the shape is there; one parameter is poorly determined: fix it where it is, refit the rest
         try:
@@ -991,8 +1048,13 @@ def _try(table, cand, fit, pairs, frs, verify, ss_before, ver_before, min_eviden
                              "cramer_rao_pct": worst["cramer_rao_pct"], "insensitivity_pct": worst["insensitivity_pct"],
                              "reason": why})
         new_fit = refit
+    by_name = {p["name"]: p for p in params}
     rec.update(cost_after=float(new_fit.cost_average), evidence_after=round(ss_before - ss_after, 2),
-               parameters=params, verification_after=_ver_summary(ver_after), verification_change=change)
+               parameters=[by_name[n] for n in own[0]], verification_after=_ver_summary(ver_after),
+               verification_change=change)
+    if len(cands) > 1:
+        rec["with"] = [{"kind": c.kind, "where": c.where, "parameters": [by_name[n] for n in names]}
+                       for c, names in zip(cands[1:], own[1:])]
     reasons = shape + accuracy
     rec["accepted"] = not reasons
     rec["reason"] = "; ".join(reasons) if reasons else (
