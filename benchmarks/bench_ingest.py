@@ -28,9 +28,10 @@ from livesweep.telemetry import mavlink_codec  # noqa: F401  (MAVLink 2 before p
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def start_sim(port: int, speed: float) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "livesweep", "sim", "--axis", "da", "--axis", "dr", "--repeat", "2",
-                             "--amplitude", "3", "--off-axis-rms", "0.2", "--seed", "3", "--speed", str(speed),
+def start_sim(port: int, speed: float, repeat: int = 2) -> subprocess.Popen:
+    """`livesweep sim` streaming the XV-15 cruise sweeps (both axes, ``repeat`` each) to ``port``."""
+    return subprocess.Popen([sys.executable, "-m", "livesweep", "sim", "--axis", "da", "--axis", "dr", "--repeat",
+                             str(repeat), "--amplitude", "3", "--off-axis-rms", "0.2", "--seed", "3", "--speed", str(speed),
                              "--mavlink", f"udpout:127.0.0.1:{port}"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
 

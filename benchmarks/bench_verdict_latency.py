@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import socket
-import subprocess
 import sys
 import tempfile
 import threading
@@ -37,17 +36,11 @@ from pathlib import Path
 
 import numpy as np
 
+from bench_ingest import start_sim  # the same sim stream as the ingest benchmark (benchmarks/ is on sys.path)
 from livesweep.telemetry import mavlink_codec  # noqa: F401  (MAVLink 2 before pymavlink loads)
 
 ROOT = Path(__file__).resolve().parents[1]
 UPDATE_WALL_S = 0.2          # estimates (and test-point judgements) this often [s of wall time]
-
-
-def start_sim(port: int, speed: float, repeat: int) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "livesweep", "sim", "--axis", "da", "--axis", "dr", "--repeat",
-                             str(repeat), "--amplitude", "3", "--off-axis-rms", "0.2", "--seed", "3", "--speed",
-                             str(speed), "--mavlink", f"udpout:127.0.0.1:{port}"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
 
 class Operator(threading.Thread):

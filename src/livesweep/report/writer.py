@@ -323,7 +323,9 @@ def _html_parametric(report: dict) -> str:
                 head = f"added <b>{e(eff['kind'])}</b> at <b>{e(eff['where'])}</b>: {e(pars)}"
             else:
                 head = "nothing added"
-            tried = "".join(f"<li>{e(t['kind'])} at {e(t['where'])}: J<sub>ave</sub> {t['cost_after']:.2f}, {e(t['reason'])}</li>"
+            tried = "".join(f"<li>{e(t['kind'])} at {e(t['where'])}"
+                            + "".join(f" with {e(w['kind'])} at {e(w['where'])}" for w in t.get("with", ()))
+                            + f": J<sub>ave</sub> {t['cost_after']:.2f}, {e(t['reason'])}</li>"
                             for t in st["tried"])
             blocks.append(f"<h3>Step {k + 1}: {head}</h3><p>J<sub>ave</sub> {st['cost_before']:.2f} &rarr; "
                           f"{st['cost_after']:.2f}{ver}. Ranked evidence (noise units): {e(cands)}</p>"
