@@ -232,15 +232,24 @@ def test_resampled_record_size_is_checked_before_resampling(tmp_path):
         assert w in msg, (w, msg)
 
 
-@pytest.mark.parametrize("value", [math.inf, math.nan, 0.0, -1.0, "x", True])
-def test_residual_min_evidence_must_be_finite_and_positive(tmp_path, value):
+@pytest.mark.parametrize("value", [math.inf, math.nan, 0.0, -1.0, 0.5, "x", True])
+def test_residual_false_alarm_must_be_a_small_probability(tmp_path, value):
     from types import SimpleNamespace
 
-    from livesweep.ident.residual import KINDS
     from livesweep.pipeline.residual import residual_settings
 
-    case = SimpleNamespace(path=tmp_path / "case.toml", tables={"residual": {"min_evidence": {KINDS[0]: value}}})
-    with pytest.raises(ConfigError, match=f"min_evidence.{KINDS[0]} = .*finite positive"):
+    case = SimpleNamespace(path=tmp_path / "case.toml", tables={"residual": {"false_alarm": value}})
+    with pytest.raises(ConfigError, match=r"\[residual\]\.false_alarm = .*probability in \(0, 0.2\]"):
+        residual_settings(case)
+
+
+def test_residual_min_evidence_is_refused_with_what_replaced_it(tmp_path):
+    from types import SimpleNamespace
+
+    from livesweep.pipeline.residual import residual_settings
+
+    case = SimpleNamespace(path=tmp_path / "case.toml", tables={"residual": {"min_evidence": {"time_delay": 50}}})
+    with pytest.raises(ConfigError, match=r"min_evidence: no longer used.*set false_alarm"):
         residual_settings(case)
 
 

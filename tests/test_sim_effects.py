@@ -75,8 +75,13 @@ INPUT_AND_OUTPUT_EFFECTS = [
     ("actuator_lag", dict(input="da", time_constant_s=0.1), ("p", "da"), lambda s: 1 / (0.1 * s + 1)),
     ("actuator_second_order", dict(input="dr", omega_rad_s=15.0, zeta=0.6), ("r", "dr"),
      lambda s: 225.0 / (s**2 + 18.0 * s + 225.0)),
-    ("structural_mode", dict(output="p", omega_rad_s=OMEGAS[5], zeta=0.05, gain=2.0), ("p", "da"),
+    ("structural_mode", dict(output="p", omega_rad_s=OMEGAS[5], zeta_pole=0.05, zeta_zero=0.15), ("p", "da"),
      lambda s: 1 + 2.0 * 2 * 0.05 * OMEGAS[5] * s / (s**2 + 2 * 0.05 * OMEGAS[5] * s + OMEGAS[5] ** 2)),
+    # a dipole with its zero below the pole: (w/wz)^2 (s^2 + 2 zz wz s + wz^2)/(s^2 + 2 zp w s + w^2)
+    ("structural_mode", dict(output="r", omega_rad_s=OMEGAS[5], zeta_pole=0.04, zeta_zero=0.1,
+                             omega_zero_rad_s=0.9 * OMEGAS[5]), ("r", "dr"),
+     lambda s: (1 / 0.81) * (s**2 + 2 * 0.1 * 0.9 * OMEGAS[5] * s + (0.9 * OMEGAS[5]) ** 2)
+     / (s**2 + 2 * 0.04 * OMEGAS[5] * s + OMEGAS[5] ** 2)),
     ("notch_filter", dict(input="da", omega_rad_s=OMEGAS[5], zeta=0.3, depth=0.8), ("p", "da"),
      lambda s: (s**2 + 2 * 0.3 * 0.2 * OMEGAS[5] * s + OMEGAS[5] ** 2) / (s**2 + 2 * 0.3 * OMEGAS[5] * s + OMEGAS[5] ** 2)),
     ("sensor_skew", dict(output="p", delay_s=0.05), ("p", "da"), lambda s: np.exp(-0.05 * s)),
@@ -102,8 +107,9 @@ def test_effect_is_its_analytic_frequency_response(nominal, kind, params, pair, 
         assert_ratio(r2, np.ones_like(expected))
 
 
-def test_structural_mode_peaks_at_one_plus_gain():
-    e = make_effect("structural_mode", output="p", omega_rad_s=12.0, zeta=0.05, gain=1.5)
+def test_structural_mode_peaks_at_the_ratio_of_its_dampings():
+    """A dipole with zero and pole at one frequency peaks at zeta_zero / zeta_pole there."""
+    e = make_effect("structural_mode", output="p", omega_rad_s=12.0, zeta_pole=0.05, zeta_zero=0.125)
     w = np.linspace(5, 20, 3001)
     mag = np.abs(e.frequency_response(w))
     assert mag.max() == pytest.approx(2.5, rel=1e-6)
@@ -189,7 +195,8 @@ def test_engine_equals_scipy_lsim_with_first_order_hold():
 
     m = get_model("xv15-cruise")
     sysa = replace(augment(m, [make_effect("actuator_lag", input="da", time_constant_s=0.05),
-                               make_effect("structural_mode", output="p", omega_rad_s=11.0, zeta=0.05, gain=1.0)]),
+                               make_effect("structural_mode", output="p", omega_rad_s=11.0, zeta_pole=0.05,
+                                           zeta_zero=0.1, omega_zero_rad_s=10.0)]),
                    delays_s=np.zeros(2))
     t = np.arange(0, 30, 1 / 400)
     u = np.column_stack([np.sin(0.5 * t + 0.05 * t**2), 0.3 * np.cos(2.1 * t)])

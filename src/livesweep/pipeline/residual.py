@@ -7,25 +7,24 @@ The case's optional ``[residual]`` table::
     enabled = true                       # default true when the case has [state_space]
     max_steps = 3                        # effects added at most
     kinds = ["time_delay", "sensor_skew"]   # default: the whole catalogue
-    min_evidence = { scale_factor = 400 }   # per-kind noise thresholds (default: measured ones)
+    false_alarm = 0.01                   # probability per step of adding an effect to a clean log
 
 Verification records of the case (``[[verify]]``) drive the time-domain test of every change.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 from livesweep.config import Case, require_table
 from livesweep.errors import ConfigError
-from livesweep.ident.residual import KINDS, MIN_EVIDENCE, ResidualLoop, run_residual_loop
+from livesweep.ident.residual import FALSE_ALARM, KINDS, ResidualLoop, run_residual_loop
 from livesweep.pipeline.parametric import VerificationRunner
 from livesweep.spectral.response import FrequencyResponseSet
 
 __all__ = ["ResidualStage", "residual_settings", "run_residual_stage"]
 
-_KEYS = {"enabled", "max_steps", "kinds", "min_evidence"}
+_KEYS = {"enabled", "max_steps", "kinds", "false_alarm", "min_evidence"}
 
 
 @dataclass(frozen=True)
@@ -54,16 +53,13 @@ def residual_settings(case: Case) -> dict:
     for i, k in enumerate(kinds):
         if k not in KINDS:
             raise ConfigError(f"{where}.kinds[{i}] = {k!r}: unknown effect kind; known: {', '.join(KINDS)}")
-    me = raw.get("min_evidence", {})
-    if not isinstance(me, dict):
-        raise ConfigError(f"{where}.min_evidence = {me!r}: must be a table of kind = number")
-    for k, v in me.items():
-        if k not in KINDS:
-            raise ConfigError(f"{where}.min_evidence.{k}: unknown effect kind; known: {', '.join(KINDS)}")
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < math.inf:
-            raise ConfigError(f"{where}.min_evidence.{k} = {v!r}: must be a finite positive number")
-    return {"enabled": enabled, "max_steps": steps, "kinds": list(kinds),
-            "min_evidence": {**MIN_EVIDENCE, **{k: float(v) for k, v in me.items()}}}
+    if "min_evidence" in raw:
+        raise ConfigError(f"{where}.min_evidence: no longer used (per-kind thresholds measured on one simulator); "
+                          f"the loop now tests significance, set false_alarm (default {FALSE_ALARM:g}) instead")
+    fa = raw.get("false_alarm", FALSE_ALARM)
+    if isinstance(fa, bool) or not isinstance(fa, (int, float)) or not 0 < fa <= 0.2:
+        raise ConfigError(f"{where}.false_alarm = {fa!r}: must be a probability in (0, 0.2]")
+    return {"enabled": enabled, "max_steps": steps, "kinds": list(kinds), "false_alarm": float(fa)}
 
 
 def run_residual_stage(case: Case, frs: FrequencyResponseSet, ss, *, runner=None,
@@ -87,6 +83,6 @@ def run_residual_stage(case: Case, frs: FrequencyResponseSet, ss, *, runner=None
 
     loop = run_residual_loop(case.tables["state_space"], ss.fit, frs, verify=verify if runner else None,
                              max_steps=settings["max_steps"], kinds=settings["kinds"],
-                             min_evidence=settings["min_evidence"], progress=progress)
+                             false_alarm=settings["false_alarm"], progress=progress)
     after = tuple(runner(loop.fit.model, loop.fit.theta)) if runner is not None and loop.added else ()
     return ResidualStage(loop, settings, after)

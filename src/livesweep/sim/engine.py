@@ -25,14 +25,7 @@ import numpy as np
 
 from livesweep.errors import ConfigError
 from livesweep.lti import discretize_foh, discretize_zoh
-from livesweep.sim.effects import (
-    ActuatorLag,
-    ActuatorSecondOrder,
-    Effect,
-    NotchFilter,
-    StructuralMode,
-    TimeDelay,
-)
+from livesweep.effects import Effect
 from livesweep.sim.models import LinearVehicleModel
 
 __all__ = ["Turbulence", "PilotLoop", "AugmentedSystem", "augment", "discretize", "step", "shift"]
@@ -145,8 +138,8 @@ def augment(model: LinearVehicleModel, effects: list[Effect] = (), turbulence: T
     ----------
     model : LinearVehicleModel
     effects : list of Effect
-        Only ``time_delay``, ``actuator_lag``, ``actuator_second_order``, ``notch_filter`` and ``structural_mode``
-        change the dynamics; the others are sensor effects handled at sampling.
+        Those with ``dynamics`` (delays, actuators, filters, structural modes) change the
+        dynamics; the others are sensor effects handled at sampling.
     turbulence : Turbulence or None
 
     Returns
@@ -162,13 +155,12 @@ def augment(model: LinearVehicleModel, effects: list[Effect] = (), turbulence: T
             i = model.input_index(eff.input)
         else:
             model.output_index(eff.output)
-        if isinstance(eff, TimeDelay):
+        if eff.dynamics == "delay":
             delays[i] += eff.delay_s
-        elif isinstance(eff, (ActuatorLag, ActuatorSecondOrder, NotchFilter)):
+        elif eff.dynamics == "input_block":
             in_blocks[eff.input].append(eff.state_space())
-        elif isinstance(eff, StructuralMode):
-            A, B, C, D = eff.state_space()
-            out_blocks[eff.output].append((A, B, C, D + 1.0))
+        elif eff.dynamics == "output_block":
+            out_blocks[eff.output].append(eff.state_space())
 
     # Stage 1: input chains, with the gust noise passed straight through.
     inputs_stage = _block_diag_ss([_chain(in_blocks[n]) for n in model.inputs] + [_identity_ss(n_g)])

@@ -1,0 +1,85 @@
+"""A derivative the model lacks: a fixed parameter that should be free, or an absent entry."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+
+from livesweep.effects.base import Candidate, Effect
+from livesweep.effects.table import EFFECT_STATE_PREFIXES, add_entry, fresh, has_parameter, is_zero, normalised
+
+__all__ = ["MissingDerivative", "derivative_slots"]
+
+
+def _dynamic_rows(table, params) -> list[int]:
+    """Vehicle state equations with at least one parameter (kinematic rows like phi' = p and the
+    states of added effects are left alone)."""
+    rows = []
+    for i in range(len(table["states"])):
+        if table["states"][i].startswith(EFFECT_STATE_PREFIXES):
+            continue
+        entries = list(table["F"][i]) + list(table["G"][i])
+        if any(has_parameter(e, params) for e in entries):
+            rows.append(i)
+    return rows
+
+
+def derivative_slots(table, model):
+    """(parameter name, index or None, entry ``"F[i][j]"``) of the fixed parameters (delays and
+    skews aside) and of the absent entries in the dynamic rows of F and G."""
+    params = set(table.get("parameters", {}))
+    slots = []
+    for n, f in zip(model.parameters, model.fixed):
+        if f and not n.startswith(("tau", "skew")):
+            slots.append((n, model.index(n), n))
+    states, inputs = table["states"], table["inputs"]
+    for i in _dynamic_rows(table, params):
+        for key, cols in (("F", states), ("G", inputs)):
+            for j, e in enumerate(table[key][i]):
+                if is_zero(e) and not (key == "F" and states[j].startswith(EFFECT_STATE_PREFIXES)):
+                    name = fresh(f"{key}_{states[i]}_{cols[j]}", params)
+                    slots.append((name, None, f"{key}[{states[i]}][{cols[j]}]"))
+    return slots
+
+
+class MissingDerivative(Effect):
+    """A stability or control derivative the model lacks (not simulated: a property of the model).
+
+    Residual signature: the model's own sensitivity (log-response Jacobian) to the parameter,
+    a fixed one freed or an absent entry of F or G given a new parameter ``F_<row>_<col>``.
+    """
+
+    kind: ClassVar[str] = "missing_derivative"
+    acts_on: ClassVar[str] = "entry"
+    searched: ClassVar[bool] = True
+    n_parameters: ClassVar[int] = 1
+
+    @classmethod
+    def candidates(cls, space, table):
+        from livesweep.ident.state_space import StateSpaceModel
+
+        model, theta = space.model, space.theta
+        out = []
+        for name, k, target in derivative_slots(table, model):
+            if k is not None:
+                col = space.log_jacobian(model, theta, k)
+            else:
+                aug = normalised(table)
+                add_entry(aug, target, name)
+                m2 = StateSpaceModel.from_table(aug)
+                th2 = np.array([theta[model.index(n)] if n in model.parameters else 0.0 for n in m2.parameters])
+                col = space.log_jacobian(m2, th2, m2.index(name))
+            a, ev = space.linear(col)
+            cur = float(theta[k]) if k is not None else 0.0
+            out.append(Candidate(cls.kind, name if k is not None else target, {"name": name, "value": cur + a}, ev,
+                                 cls.n_parameters))
+        return out
+
+    @classmethod
+    def augment(cls, t, where, par):
+        name = par["name"]
+        if name in t["parameters"]:
+            t["parameters"][name] = {"value": float(par["value"])}
+            return t, [name]
+        return t, add_entry(t, where, name, par["value"])
