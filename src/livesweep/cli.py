@@ -590,16 +590,16 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="verb", required=True)
 
     s = sub.add_parser("sim", help="simulate a test point (sweeps or verification manoeuvres) to MCAP or live MAVLink")
-    s.add_argument("--model", default="xv15-cruise", help="vehicle model: xv15-cruise or xv15-hover")
+    s.add_argument("--model", default="xv15-cruise", help="vehicle model: xv15-cruise, xv15-hover or quad-attitude")
     s.add_argument("--manoeuvre", default="sweep", choices=["sweep", "doublet", "3211", "step"])
-    s.add_argument("--axis", action="append", help="input to excite (da, dr); repeat for several; default da")
+    s.add_argument("--axis", action="append", help="input to excite (XV-15: da, dr; quad-attitude: roll_cmd, pitch_cmd); repeat for several; default the first")
     s.add_argument("--repeat", type=int, default=2, help="sweeps per axis")
     s.add_argument("--omega-min", type=_positive_float, default=0.3, help="sweep start frequency [rad/s]")
     s.add_argument("--omega-max", type=_positive_float, default=20.0, help="sweep end frequency [rad/s]")
     s.add_argument("--duration", type=_positive_float, default=100.0, help="sweep length without trims [s]")
-    s.add_argument("--amplitude", type=_positive_float, default=2.0, help="sweep or pulse amplitude [deg]")
+    s.add_argument("--amplitude", type=_positive_float, default=2.0, help="sweep or pulse amplitude [input units: deg for the XV-15, -1..1 for quad-attitude]")
     s.add_argument("--pulse", type=_positive_float, default=1.0, help="doublet/3211 unit pulse or step hold [s]")
-    s.add_argument("--off-axis-rms", type=_positive_float, default=0.0, help="uncorrelated pilot noise on other inputs [deg rms]")
+    s.add_argument("--off-axis-rms", type=_positive_float, default=0.0, help="uncorrelated pilot noise on other inputs [input units rms]")
     s.add_argument("--effect", action="append", default=[], metavar="KIND:key=value,...",
                    help="inject an effect, e.g. sensor_skew:output=p,delay_s=0.05 (repeatable)")
     s.add_argument("--no-noise", action="store_true", help="no sensor noise")
@@ -734,11 +734,18 @@ def cmd_stream(args) -> int:
     return 0
 
 
+def _default_axis(model: str) -> str:
+    """The first input of ``model`` (``da`` for the XV-15; an unknown model is reported later)."""
+    from livesweep.sim.models import MODELS
+
+    return MODELS[model]().inputs[0] if model in MODELS else "da"
+
+
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if getattr(args, "axis", None) is None and args.verb == "sim":
-        args.axis = ["da"]
+        args.axis = [_default_axis(args.model)]
     try:
         return args.func(args)
     except LivesweepError as exc:

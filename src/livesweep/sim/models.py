@@ -1,4 +1,5 @@
-"""Linear vehicle models for the simulator: the XV-15 lateral-directional models of the seed.
+"""Linear vehicle models for the simulator: the XV-15 lateral-directional models of the seed and a
+small quadrotor's roll/pitch attitude dynamics in hover (:func:`quad_attitude`, SI units).
 
 Model structure (both flight conditions, body axes, level trim, small angles, M = I)::
 
@@ -45,12 +46,15 @@ from livesweep.numbers import frozen_array as _frozen
 
 RAD2DEG = 180.0 / np.pi
 G_FT_S2 = 32.174
+G_M_S2 = 9.80665
 KNOT_FT_S = 1.6878099
 
 __all__ = [
     "LinearVehicleModel",
     "xv15_cruise",
     "xv15_hover",
+    "quad_attitude",
+    "QUAD_AIRFRAME",
     "MODELS",
     "get_model",
 ]
@@ -264,7 +268,176 @@ def xv15_hover() -> LinearVehicleModel:
     )
 
 
-MODELS = {"xv15-cruise": xv15_cruise, "xv15-hover": xv15_hover}
+#: Physical data the quadrotor's derivatives are estimated from (see :func:`quad_attitude`).
+QUAD_AIRFRAME = {
+    "mass_kg": 1.0,
+    "Ixx_kg_m2": 0.010,
+    "Iyy_kg_m2": 0.012,
+    "arm_m": 0.159,            # motor lever about the roll and pitch axes: 450 mm X frame, 0.225 m / sqrt(2)
+    "rotor_radius_m": 0.127,   # 10 in propellers
+    "dT_dw_N_s_m": 0.19,       # thrust change per m/s of axial velocity, one rotor in hover
+    "dT_cmd_N": 0.63,          # differential thrust per motor at a full (1.0) roll or pitch command
+}
+
+
+def _quad_matrices(d: dict, g: float):
+    """F, G and gust_F of the quadrotor model (states v, p, phi, u, q, theta; inputs roll_cmd, pitch_cmd).
+
+    Parameters
+    ----------
+    d : dict
+        Derivatives (SI: 1/s, rad/(m s), rad/s^2 per unit command).
+    g : float
+        Gravity [m/s^2].
+
+    Returns
+    -------
+    F, G, gust_F : list of list of float
+        ``gust_F`` columns are ``u_g``, ``v_g`` [m/s]: minus the aerodynamic part of the u and v columns.
+    """
+    F = [
+        [d["Yv"], 0.0, g, 0.0, 0.0, 0.0],
+        [d["Lv"], d["Lp"], 0.0, 0.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0, 0.0, 0.0, 0.0],
+        [0.0, 0.0, 0.0, d["Xu"], 0.0, -g],
+        [0.0, 0.0, 0.0, d["Mu"], d["Mq"], 0.0],
+        [0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+    ]
+    G = [
+        [0.0, 0.0],
+        [d["Lroll"], d["Lpitch"]],
+        [0.0, 0.0],
+        [0.0, 0.0],
+        [d["Mroll"], d["Mpitch"]],
+        [0.0, 0.0],
+    ]
+    gust_F = [
+        [0.0, -d["Yv"]],
+        [0.0, -d["Lv"]],
+        [0.0, 0.0],
+        [-d["Xu"], 0.0],
+        [-d["Mu"], 0.0],
+        [0.0, 0.0],
+    ]
+    return F, G, gust_F
+
+
+def _quad_outputs(d: dict) -> dict:
+    """Output rows of the quadrotor: name -> (H row, J row, gust_H row (u_g, v_g), units)."""
+    zero2 = [0.0, 0.0]
+    return {
+        "p": ([0.0, RAD2DEG, 0.0, 0.0, 0.0, 0.0], zero2, zero2, "deg/s"),
+        "q": ([0.0, 0.0, 0.0, 0.0, RAD2DEG, 0.0], zero2, zero2, "deg/s"),
+        "phi": ([0.0, 0.0, RAD2DEG, 0.0, 0.0, 0.0], zero2, zero2, "deg"),
+        "theta": ([0.0, 0.0, 0.0, 0.0, 0.0, RAD2DEG], zero2, zero2, "deg"),
+        "ax": ([0.0, 0.0, 0.0, d["Xu"], 0.0, 0.0], zero2, [-d["Xu"], 0.0], "m/s^2"),
+        "ay": ([d["Yv"], 0.0, 0.0, 0.0, 0.0, 0.0], zero2, [0.0, -d["Yv"]], "m/s^2"),
+    }
+
+
+def quad_attitude() -> LinearVehicleModel:
+    """A small quadrotor's bare-airframe roll and pitch dynamics in hover (SI units).
+
+    Vehicle: about 1 kg, 450 mm X frame, 10 in propellers (:data:`QUAD_AIRFRAME`), no rate or
+    attitude loop in the model (the simulator flies it with one: ``livesweep.sim.scenario``).
+
+    Model (body axes, level hover trim, small angles, M = I; the two axes are uncoupled except
+    through the control cross-coupling ``Lpitch``, ``Mroll``)::
+
+        states  x = [v, p, phi, u, q, theta]   v, u in m/s; p, q in rad/s; phi, theta in rad
+        inputs  u = [roll_cmd, pitch_cmd]      normalised moment commands, units "1" (-1..1),
+                                               as the mixer input (PX4 actuator_controls 0/1)
+
+        v'     = Yv v + g phi                  u'     = Xu u - g theta
+        p'     = Lv v + Lp p + Lroll roll_cmd + Lpitch pitch_cmd
+        q'     = Mu u + Mq q + Mroll roll_cmd + Mpitch pitch_cmd
+        phi'   = p                             theta' = q
+
+    with ``g = 9.80665 m/s^2`` and both inputs delayed by 0.02 s (ESC and motor spin-up latency,
+    as a pure delay). Sensed outputs (degrees for angles and rates, as the XV-15 models)::
+
+        p, q       [deg/s]  = 57.2958 p, 57.2958 q
+        phi, theta [deg]    = 57.2958 phi, 57.2958 theta
+        ax         [m/s^2]  = Xu u     (specific force: u' + g theta)
+        ay         [m/s^2]  = Yv v     (specific force: v' - g phi)
+
+    Gusts ``u_g``, ``v_g`` [m/s] enter as the XV-15's ``v_g``: the rotor forces and moments act
+    on the air-relative velocities ``u - u_g`` and ``v - v_g``.
+
+    Numbers (representative, not taken from one identified vehicle; estimated from the airframe
+    data so that their sizes and signs are physical):
+
+    * ``Lroll = 40``, ``Mpitch = 33`` rad/s^2 per unit: a full command is +/-0.63 N per motor
+      (26 % of the 2.45 N hover thrust), 4 x 0.63 N x 0.159 m = 0.40 N m over Ixx = 0.010 and
+      Iyy = 0.012 kg m^2.
+    * ``Lp = -4.0``, ``Mq = -3.4`` 1/s (rotor damping): the differential-thrust part is
+      ``-4 l^2 dT/dw / I = -1.9`` 1/s about roll, with ``dT/dw = 0.19 N/(m/s)`` per rotor from the
+      hover heave-damping formula ``dT/dw = 2 a s rho A (Omega R) lambda0 / (16 lambda0 + a s)``
+      (Padfield, *Helicopter Flight Dynamics*, 2nd ed., 2007, Ch. 4; a = 5.7, s = 0.10,
+      Omega R = 66 m/s, lambda0 = 0.067); the rotors' hub moments under body rate (blade
+      flapping lag) add about as much again.
+    * ``Yv = -0.30``, ``Xu = -0.25`` 1/s: the rotor drag (induced drag and H-force) linear in the
+      air-relative velocity, the "rotor drag" term of Mahony, Kumar and Corke, "Multirotor Aerial
+      Vehicles", IEEE Robotics & Automation Magazine 19(3), 2012; 0.25-0.3 N per m/s for a 1 kg
+      vehicle.
+    * ``Lv = -0.80``, ``Mu = +0.65`` rad/(m s): speed stability from blade flapping (the rotors
+      flap away from the relative wind and tilt the thrust back), the signs of a helicopter's
+      hover derivatives; 0.008 N m per m/s.
+    * ``Lpitch = 4.0``, ``Mroll = -3.3`` rad/s^2 per unit: the autopilot (IMU) sits yawed 0.1 rad
+      (5.7 deg) against the frame's mixer axes, so each 0.40 N m command moment has a 10 % component
+      about the other body axis (0.04 N m over Ixx, -0.04 N m over Iyy); large enough to identify
+      from the off-axis responses.
+
+    The structure (quasi-steady speed derivatives, attitude-rate damping and a delay on the
+    control) is the hover bare-airframe structure that frequency-domain identification of small
+    quadrotors uses (e.g. Wei, Tischler, Schwartz and Cohen, "System Identification and Controller
+    Optimization of a Quadrotor UAV", AHS 71st Forum, 2015).
+
+    Stability: each axis has the characteristic polynomial
+    ``s^3 - (Yv + Lp) s^2 + Yv Lp s - g Lv`` (roll) and ``s^3 - (Xu + Mq) s^2 + Xu Mq s + g Mu``
+    (pitch). With these numbers both are unstable: a stable real pole at -4.43 (roll) and
+    -3.86 rad/s (pitch) and an unstable oscillation at 0.065 +/- 1.329j (roll, time to double
+    11 s) and 0.104 +/- 1.281j rad/s (pitch, 7 s), the hover "phugoid" of speed stability and
+    gravity. Sweeps therefore need the stabilising loop of ``livesweep.sim.scenario``.
+
+    Returns
+    -------
+    LinearVehicleModel
+        Outputs ``p, q, phi, theta, ax, ay``; gusts ``u_g, v_g`` [m/s]; delays 0.02 s on both inputs.
+    """
+    d = {
+        "Yv": -0.30, "Lv": -0.80, "Lp": -4.0,
+        "Xu": -0.25, "Mu": 0.65, "Mq": -3.4,
+        "Lroll": 40.0, "Lpitch": 4.0,
+        "Mroll": -3.3, "Mpitch": 33.0,
+    }
+    F, G, gust_F = _quad_matrices(d, G_M_S2)
+    rows = _quad_outputs(d)
+    outputs = ("p", "q", "phi", "theta", "ax", "ay")
+    return LinearVehicleModel(
+        name="quad-attitude",
+        description="quadrotor, 1 kg, 450 mm X frame, hover, bare airframe roll and pitch (representative)",
+        states=("v", "p", "phi", "u", "q", "theta"),
+        state_units=("m/s", "rad/s", "rad", "m/s", "rad/s", "rad"),
+        inputs=("roll_cmd", "pitch_cmd"),
+        input_units=("1", "1"),
+        outputs=outputs,
+        output_units=tuple(rows[o][3] for o in outputs),
+        F=_frozen(F),
+        G=_frozen(G),
+        H=_frozen([rows[o][0] for o in outputs]),
+        J=_frozen([rows[o][1] for o in outputs]),
+        input_delays_s=(0.02, 0.02),
+        gust_names=("u_g", "v_g"),
+        gust_F=_frozen(gust_F),
+        gust_H=_frozen([rows[o][2] for o in outputs]),
+        seed_outputs=outputs,
+        derivatives=dict(d),
+        constants={"g_m_s2": G_M_S2, **QUAD_AIRFRAME},
+    )
+
+
+MODELS = {"xv15-cruise": xv15_cruise, "xv15-hover": xv15_hover, "quad-attitude": quad_attitude}
 
 
 def get_model(name: str) -> LinearVehicleModel:

@@ -29,6 +29,8 @@ __all__ = [
     "default_sensors",
     "default_turbulence",
     "default_pilot",
+    "VehicleDefaults",
+    "VEHICLE_DEFAULTS",
     "sweep_scenario",
     "verification_scenario",
 ]
@@ -318,15 +320,71 @@ _SENSOR_DEFAULTS = {
 }
 
 
+@dataclass(frozen=True)
+class VehicleDefaults:
+    """A model's own standard test-point settings (models without an entry use the XV-15's).
+
+    Parameters
+    ----------
+    sensors : dict of str -> (float, float)
+        Output -> (rate [Hz], white-noise 1 sigma [output units]).
+    turbulence : Turbulence
+        Light turbulence on the model's gusts.
+    pilot : PilotLoop or None
+        The stabilising loop the test points are flown with.
+    input_rate_hz : float
+        Rate at which the commands are logged [Hz].
+    internal_rate_hz : float
+        Simulation grid [Hz]; every rate above divides it.
+    """
+
+    sensors: dict
+    turbulence: Turbulence
+    pilot: PilotLoop | None
+    input_rate_hz: float = 50.0
+    internal_rate_hz: float = 400.0
+
+
+#: Per-model defaults, by model name.
+VEHICLE_DEFAULTS = {
+    # Quadrotor: IMU (gyros, accelerometers) and the commands logged at the 400 Hz rate-loop rate,
+    # attitude estimate at 200 Hz (PX4 logs vehicle_attitude at 200-250 Hz). Noise: a MEMS gyro's
+    # ~0.007 deg/s/sqrt(Hz) over 200 Hz, with vibration, 0.1 deg/s; accelerometers 0.1 m/s^2
+    # (vibration after the autopilot's low-pass filter); estimator attitude 0.05 deg.
+    # Turbulence: 0.5 m/s gusts with a 2 s correlation time (light air near the ground).
+    # Pilot: the autopilot's attitude hold, roll_cmd = -0.008 phi - 0.002 p (per deg, per deg/s),
+    # pitch alike, 5 ms loop latency: about 4.5 rad/s crossover, 80 deg phase and 23 dB gain
+    # margin with the 20 ms motor delay; slowest closed-loop pole -0.9 rad/s.
+    "quad-attitude": VehicleDefaults(
+        sensors={"p": (400.0, 0.1), "q": (400.0, 0.1), "ax": (400.0, 0.1), "ay": (400.0, 0.1),
+                 "phi": (200.0, 0.05), "theta": (200.0, 0.05)},
+        turbulence=Turbulence(sigmas=(0.5, 0.5), correlation_time_s=2.0),
+        pilot=PilotLoop(gains=(("roll_cmd", "phi", -0.008), ("roll_cmd", "p", -0.002),
+                               ("pitch_cmd", "theta", -0.008), ("pitch_cmd", "q", -0.002)), delay_s=0.005),
+        input_rate_hz=400.0,
+        internal_rate_hz=400.0,
+    ),
+}
+
+
 def default_sensors(model: LinearVehicleModel, noise: bool = True) -> tuple[Sensor, ...]:
     """One sensor per model output at a realistic rate, with (or without) white noise."""
-    return tuple(
-        Sensor(o, _SENSOR_DEFAULTS[o][0], _SENSOR_DEFAULTS[o][1] if noise else 0.0) for o in model.outputs
-    )
+    own = VEHICLE_DEFAULTS.get(model.name)
+    table = own.sensors if own is not None else _SENSOR_DEFAULTS
+    for o in model.outputs:
+        if o not in table:
+            raise ConfigError(f"no default sensor for output {o!r} of model {model.name!r}; give sensors explicitly")
+    return tuple(Sensor(o, table[o][0], table[o][1] if noise else 0.0) for o in model.outputs)
 
 
 def default_turbulence(model: LinearVehicleModel) -> Turbulence:
-    """Light turbulence: cruise sigma_v 3 ft/s, sigma_p 0.02 rad/s, T 4 s; hover 1.5 ft/s, 0.02 rad/s, 3 s."""
+    """Light turbulence: cruise sigma_v 3 ft/s, sigma_p 0.02 rad/s, T 4 s; hover 1.5 ft/s, 0.02 rad/s, 3 s.
+
+    Models in :data:`VEHICLE_DEFAULTS` use their own (the quadrotor: 0.5 m/s on u_g and v_g, 2 s).
+    """
+    own = VEHICLE_DEFAULTS.get(model.name)
+    if own is not None:
+        return own.turbulence
     if model.constants.get("U0_ft_s", 0.0) > 0:
         return Turbulence(sigmas=(3.0, 0.02), correlation_time_s=4.0)
     return Turbulence(sigmas=(1.5, 0.02), correlation_time_s=3.0)
@@ -337,14 +395,27 @@ def default_pilot(model: LinearVehicleModel) -> PilotLoop | None:
 
     For the XV-15 in hover: aileron = 0.5 phi + 0.2 p and rudder = -1.0 r (deg per deg and
     per deg/s), 0.2 s reaction delay; the closed loop's slowest pole is then -0.18 rad/s.
+    Models in :data:`VEHICLE_DEFAULTS` use their own loop (the quadrotor: its autopilot's
+    attitude hold).
     """
+    own = VEHICLE_DEFAULTS.get(model.name)
+    if own is not None:
+        return own.pilot
     if np.all(model.eigenvalues().real < 0):
         return None
     return PilotLoop(gains=(("da", "phi", 0.5), ("da", "p", 0.2), ("dr", "r", -1.0)), delay_s=0.2)
 
 
+def _rates(m: LinearVehicleModel) -> dict:
+    """``input_rate_hz`` and ``internal_rate_hz`` of the model's standard test points [Hz]."""
+    own = VEHICLE_DEFAULTS.get(m.name)
+    if own is None:
+        return {}
+    return {"input_rate_hz": own.input_rate_hz, "internal_rate_hz": own.internal_rate_hz}
+
+
 def _standard_scenario(m, segments, effects, noise, turbulence, seed, turbulence_scale: float = 1.0) -> Scenario:
-    """A test point with the model's default sensors, turbulence (scaled) and (if unstable) pilot."""
+    """A test point with the model's default sensors, turbulence (scaled), (if unstable) pilot and rates."""
     turb = None
     if turbulence:
         d = default_turbulence(m)
@@ -358,6 +429,7 @@ def _standard_scenario(m, segments, effects, noise, turbulence, seed, turbulence
         pilot=default_pilot(m),
         seed=seed,
         condition=m.description,
+        **_rates(m),
     )
 
 

@@ -8,17 +8,20 @@ message                rate      fields (simulator units -> MAVLink units)
 =====================  ========  =================================================================
 ``SERVO_OUTPUT_RAW``   inputs    ``servo1_raw`` = 1500 + 10 us/deg x da, ``servo4_raw`` = ... x dr
                                  (commands, whole microseconds; clipped to 1000..2000 and counted)
-``HIGHRES_IMU``        p, r, ay  ``xgyro`` = p, ``zgyro`` = r [rad/s]; ``yacc`` = ay [m/s^2];
-                                 ``zacc`` = -9.80665 (level trim)
-``ATTITUDE``           phi       ``roll`` = phi [rad], ``rollspeed``/``yawspeed`` = p, r [rad/s],
-                                 ``yaw`` = integral of r [rad]
+``ACTUATOR_CONTROL_``  inputs    quadrotor: ``controls[0]``/``controls[1]`` = roll_cmd/pitch_cmd
+``TARGET``                       (normalised -1..1, ``group_mlx`` 0, PX4's attitude group)
+``HIGHRES_IMU``        p, q, r,  ``xgyro``/``ygyro``/``zgyro`` = p, q, r [rad/s]; ``xacc``/``yacc`` =
+                       ax, ay    ax, ay [m/s^2]; ``zacc`` = -9.80665 (level trim)
+``ATTITUDE``           phi,      ``roll``/``pitch`` = phi, theta [rad], ``rollspeed``/``pitchspeed``/
+                       theta     ``yawspeed`` = p, q, r [rad/s], ``yaw`` = integral of r [rad]
 ``AOA_SSA``            beta      ``SSA`` = beta [deg], ``AOA`` = trim angle of attack [deg]
 ``ODOMETRY``           v         ``vy`` = v [m/s] body frame (FRD), ``vx`` = U0 [m/s]
 ``DEBUG_VECT``         inputs    closed-loop test points only (a pilot loop flies them): the
                                  exogenous injection (sweep, doublet, off-axis noise) before the
                                  loop's feedback, ``name`` = ``"SWEEP_INJ"``, ``x``/``y``/``z`` =
-                                 da/de/dr [deg]; the common reference of method.md §4.6
-``HEARTBEAT``          1 Hz      MAV_TYPE_VTOL_TILTROTOR
+                                 da/de/dr [deg] (quadrotor: ``x``/``y`` = roll_cmd/pitch_cmd); the
+                                 common reference of method.md §4.6
+``HEARTBEAT``          1 Hz      MAV_TYPE_VTOL_TILTROTOR (quadrotor: MAV_TYPE_QUADROTOR)
 =====================  ========  =================================================================
 
 ``publish_time`` is the vehicle time of the sample (boot clock); ``log_time`` is the simulated
@@ -58,10 +61,15 @@ FT_TO_M = 0.3048
 G_M_S2 = 9.80665
 DEG2RAD = math.pi / 180.0
 SERVO_CHANNEL = {"da": "servo1_raw", "de": "servo2_raw", "dt": "servo3_raw", "dr": "servo4_raw"}
+#: Normalised moment commands -> index in ACTUATOR_CONTROL_TARGET.controls (group 0: PX4's attitude group).
+CONTROL_INDEX = {"roll_cmd": 0, "pitch_cmd": 1}
 INJECTION_NAME = "SWEEP_INJ"
-INJECTION_FIELD = {"da": "x", "de": "y", "dr": "z"}
+INJECTION_FIELD = {"da": "x", "de": "y", "dr": "z", "roll_cmd": "x", "pitch_cmd": "y"}
 DEFAULT_START_UTC_NS = 1_778_594_400 * 10**9  # 2026-05-12T14:00:00Z, fixed so logs are reproducible
 MAV_TYPE_VTOL_TILTROTOR = 21
+MAV_TYPE_QUADROTOR = 2
+#: Vehicle type and aircraft name per model (others: the XV-15's).
+VEHICLE = {"quad-attitude": (MAV_TYPE_QUADROTOR, "quadrotor (1 kg, 450 mm X frame)")}
 MAV_FRAME_BODY_FRD = 12
 MAV_FRAME_LOCAL_FRD = 20
 
@@ -89,6 +97,25 @@ class TimedRecord:
 
 def _stamp_us(t_s: np.ndarray) -> np.ndarray:
     return np.round(np.asarray(t_s) * 1e6).astype(np.int64)
+
+
+def _accel_scale(model, name: str) -> float:
+    """Factor from the model's units of acceleration output ``name`` to m/s^2."""
+    units = model.output_units[model.output_index(name)]
+    return FT_TO_M if units == "ft/s^2" else 1.0
+
+
+def _control_columns(result: SimResult) -> dict | None:
+    """ACTUATOR_CONTROL_TARGET columns for the model's normalised moment commands (None: it has none)."""
+    model = result.scenario.model
+    names = [n for n in model.inputs if n in CONTROL_INDEX]
+    if not names:
+        return None
+    t_in = result.inputs[names[0]].t_s
+    controls = np.zeros((t_in.size, 8))
+    for n in names:
+        controls[:, CONTROL_INDEX[n]] = result.inputs[n].values
+    return {"time_usec": _stamp_us(t_in), "group_mlx": np.int64(0), "controls": controls}
 
 
 def _aligned(sig, t_ref: np.ndarray) -> np.ndarray:
@@ -142,6 +169,9 @@ def mavlink_timeline(result: SimResult, *, sysid: int = 1, compid: int = 1,
 
     # Control commands.
     t_in = result.inputs[model.inputs[0]].t_s
+    controls = _control_columns(result)
+    if controls is not None:
+        emit("ACTUATOR_CONTROL_TARGET", t_in, controls)
     servo = {}
     for name in model.inputs:
         field = SERVO_CHANNEL.get(name)
@@ -151,10 +181,11 @@ def mavlink_timeline(result: SimResult, *, sysid: int = 1, compid: int = 1,
         clipped = (pwm < PWM_LIMITS_US[0]) | (pwm > PWM_LIMITS_US[1])
         stats["pwm_clipped"][name] = int(clipped.sum())
         servo[field] = np.clip(pwm, *PWM_LIMITS_US).astype(np.int64)
-    for field in ("servo1_raw", "servo2_raw", "servo3_raw", "servo4_raw"):
-        servo.setdefault(field, np.int64(PWM_CENTER_US))
-    servo["time_usec"] = _stamp_us(t_in) % 2**32
-    emit("SERVO_OUTPUT_RAW", t_in, servo)
+    if servo:
+        for field in ("servo1_raw", "servo2_raw", "servo3_raw", "servo4_raw"):
+            servo.setdefault(field, np.int64(PWM_CENTER_US))
+        servo["time_usec"] = _stamp_us(t_in) % 2**32
+        emit("SERVO_OUTPUT_RAW", t_in, servo)
     if result.scenario.pilot is not None:
         # A closed loop feeds disturbances back into the commands; the exogenous injection is the
         # reference that removes that bias (method.md §4.6), so it is logged as flown.
@@ -171,12 +202,12 @@ def mavlink_timeline(result: SimResult, *, sysid: int = 1, compid: int = 1,
         cols = {"time_usec": _stamp_us(t), "xgyro": DEG2RAD * outs["p"].values, "zacc": np.float64(-G_M_S2),
                 "fields_updated": np.int64(0b111111)}
         valid = outs["p"].valid
-        if "r" in outs:
-            cols["zgyro"] = DEG2RAD * _aligned(outs["r"], t)
-            valid = valid & np.isfinite(cols["zgyro"])
-        if "ay" in outs:
-            cols["yacc"] = FT_TO_M * _aligned(outs["ay"], t)
-            valid = valid & np.isfinite(cols["yacc"])
+        for name, field, scale in (("q", "ygyro", DEG2RAD), ("r", "zgyro", DEG2RAD), ("ax", "xacc", None),
+                                   ("ay", "yacc", None)):
+            if name in outs:
+                k = _accel_scale(model, name) if scale is None else scale
+                cols[field] = k * _aligned(outs[name], t)
+                valid = valid & np.isfinite(cols[field])
         emit("HIGHRES_IMU", t, cols, valid)
     # Attitude.
     if "phi" in outs:
@@ -184,9 +215,10 @@ def mavlink_timeline(result: SimResult, *, sysid: int = 1, compid: int = 1,
         roll = DEG2RAD * outs["phi"].values
         cols = {"time_boot_ms": np.round(t * 1e3).astype(np.int64), "roll": roll}
         valid = np.isfinite(roll)
-        if "p" in outs:
-            cols["rollspeed"] = DEG2RAD * _aligned(outs["p"], t)
-            valid &= np.isfinite(cols["rollspeed"])
+        for name, field in (("theta", "pitch"), ("p", "rollspeed"), ("q", "pitchspeed")):
+            if name in outs:
+                cols[field] = DEG2RAD * _aligned(outs[name], t)
+                valid &= np.isfinite(cols[field])
         if "r" in outs:
             r = DEG2RAD * _aligned(outs["r"], t)
             cols["yawspeed"] = r
@@ -217,7 +249,8 @@ def mavlink_timeline(result: SimResult, *, sysid: int = 1, compid: int = 1,
         }, outs["v"].valid)
     # Heartbeat once a second.
     t_hb = np.arange(math.ceil(boot), result.t_fine_s[-1], 1.0)
-    emit("HEARTBEAT", t_hb, {"type": np.full(t_hb.size, MAV_TYPE_VTOL_TILTROTOR), "autopilot": np.int64(0),
+    mav_type = VEHICLE.get(model.name, (MAV_TYPE_VTOL_TILTROTOR, ""))[0]
+    emit("HEARTBEAT", t_hb, {"type": np.full(t_hb.size, mav_type), "autopilot": np.int64(0),
                              "base_mode": np.int64(0), "custom_mode": np.int64(0),
                              "system_status": np.int64(4), "mavlink_version": np.int64(3)})
     out.sort(key=lambda r: (r.log_time_ns, r.msgname))
@@ -254,7 +287,7 @@ def scenario_config(result: SimResult) -> dict:
     }
 
 
-def write_sim_log(result: SimResult, path, *, aircraft: str = "XV-15", notes: str = "",
+def write_sim_log(result: SimResult, path, *, aircraft: str | None = None, notes: str = "",
                   sysid: int = 1, compid: int = 1, start_utc_ns: int = DEFAULT_START_UTC_NS) -> dict:
     """Write the simulated test point as an MCAP log (atomically: nothing is left on error).
 
@@ -264,13 +297,15 @@ def write_sim_log(result: SimResult, path, *, aircraft: str = "XV-15", notes: st
     path : str or Path
         ``.mcap`` file to create.
     aircraft, notes : str
-        Test-point metadata.
+        Test-point metadata; ``aircraft`` defaults to the model's (``"XV-15"`` for the XV-15 models).
 
     Returns
     -------
     dict
         ``{"path", "message_counts", "duration_s", "stats"}``.
     """
+    if aircraft is None:
+        aircraft = VEHICLE.get(result.scenario.model.name, (0, "XV-15"))[1]
     records, stats = mavlink_timeline(result, sysid=sysid, compid=compid, start_utc_ns=start_utc_ns)
     config = scenario_config(result)
     with McapLogWriter(path, library=f"livesweep {__version__}") as w:
