@@ -304,8 +304,9 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
         judge.n_tests = max(len(cands), 1)
         n_model = _n_free(fit)
         scored = [(judge.test(ss_before, ss_before - c.evidence, c.n_parameters, n_model), c) for c in cands]
-        ranked = [c for _, c in sorted(scored, key=lambda x: -x[0].margin)]
-        strong = [c for sig, c in sorted(scored, key=lambda x: -x[0].margin) if sig.significant]
+        scored.sort(key=lambda x: -x[0].margin)
+        ranked = [c for _, c in scored]
+        strong = [c for sig, c in scored if sig.significant]
         any_significant = bool(strong)
         limits = _limits(cands, judge.test(ss_before, ss_before, 1, n_model).needed)
         tried, best, accepted = [], None, []
@@ -377,9 +378,9 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
     else:
         conclusion = "nothing to add: residual within noise"
     if limits:
-        conclusion += ("; scale factors the derivatives absorb in this band: "
-                       + ", ".join(f"{x['where']} " + ("(any size)" if x["smallest_detectable_pct"] >= 100 else
-                                                       f"(< {x['smallest_detectable_pct']:.0f} %)")
+        conclusion += ("; scale errors these data cannot show (the derivatives absorb them): "
+                       + ", ".join(f"{x['where']} " + ("any size" if x["smallest_detectable_pct"] >= 100 else
+                                                       f"up to {x['smallest_detectable_pct']:.0f} %")
                                    for x in sorted(limits, key=lambda x: -x["smallest_detectable_pct"])))
     criterion = {"false_alarm": judge.alpha, "effective_points": round(judge.n_points, 1),
                  "noise_inflation": NOISE_INFLATION}

@@ -335,10 +335,15 @@ def _html_parametric(report: dict) -> str:
                           f"(before: see the verification section)</p><img src=\"{e(r['plot'])}\" width=\"700\">")
         if rl["unexplained"]:
             blocks.append("<p>Unexplained: " + e("; ".join(str(u) for u in rl["unexplained"])) + "</p>")
+        crit = rl.get("criterion") or {}
+        test = (f" (an F-test counting its parameters and {crit['effective_points']:.0f} independent frequency "
+                f"values, false-alarm probability {crit['false_alarm']:g} per step)") if crit else ""
         parts.append("<h2>Residual loop</h2><p>The identified model's residual against the data's random error, "
                      "matched to a catalogue of missing effects; the best-supported one is added and kept only when "
-                     "the cost drops beyond noise, the verification error does not get worse beyond noise, and its "
-                     "parameters meet CR &le; 20 %, I &le; 10 %.</p>" + "".join(blocks))
+                     f"the drop of the residual is significant{e(test)}, J<sub>ave</sub> falls by 10 %, the "
+                     "verification error does not get worse beyond noise, and its parameters meet CR &le; 20 %, "
+                     "I &le; 10 % (one poorly determined shape parameter may be fixed at its fitted value).</p>"
+                     + "".join(blocks))
     return "".join(parts)
 
 
