@@ -26,9 +26,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
-import copy  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
+import tomllib  # noqa: E402
 from collections import Counter  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from dataclasses import dataclass, field  # noqa: E402
@@ -36,7 +36,6 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from livesweep.config import load_case  # noqa: E402
 from livesweep.effects import make_effect  # noqa: E402
 from livesweep.ident.residual import run_residual_loop  # noqa: E402
 from livesweep.ident.state_space import StateSpaceModel, fit_state_space, select_pairs  # noqa: E402
@@ -60,6 +59,9 @@ class Airframe:
     rate_hz: float = 50.0
     verification: tuple = ()          # (input, kind, amplitude, pulse_s) manoeuvres; () = no time-domain test
     turbulence: float = 0.5
+    references: bool = False          # analyse through the logged injections (<input>_ref), as the case does
+    duration_s: float = 100.0
+    edit: tuple = ()                  # edits of the case model every log of this airframe gets (see Case.edit)
 
 
 AIRFRAMES = {
@@ -68,6 +70,12 @@ AIRFRAMES = {
                        verification=(("da", "doublet", 2.0, 1.0), ("dr", "doublet", 3.0, 1.5), ("da", "3211", 1.5, 0.7))),
     "hover": Airframe("xv15-hover", "config/xv15_hover_lateral.toml", ("da", "dr"), (0.2, 12.0),
                       (10.0, 20.0, 40.0, 80.0, 160.0), {"da": 1.5, "dr": 3.0}),
+    # the quadrotor as config/quad_attitude.toml analyses it: 200 Hz, through the injections
+    "quad": Airframe("quad-attitude", "config/quad_attitude.toml", ("roll_cmd", "pitch_cmd"), (1.0, 60.0),
+                     (2.0, 4.0, 8.0, 14.0, 20.0), {"roll_cmd": 0.1, "pitch_cmd": 0.1}, rate_hz=200.0,
+                     references=True, duration_s=90.0,
+                     # the command latency as a bench test measured it (the case leaves it free)
+                     edit=(("fix", "tau_roll", 0.02), ("fix", "tau_pitch", 0.02))),
 }
 
 
@@ -83,17 +91,31 @@ class Case:
     truth: dict = field(default_factory=dict)   # parameter name -> injected value
     edit: tuple = ()                  # ("fix", name, value) / ("drop", "F", row, col, name)
     turbulence: float | None = None
+    log_late: tuple = ()              # (input, seconds): that input is logged this much late (an input skew)
 
 
-def _record(result, rate_hz):
-    rows = [(n, s.values[::int(round(s.rate_hz / rate_hz))]) for n, s in [*result.inputs.items(), *result.outputs.items()]]
+def _record(result, rate_hz, references=False):
+    refs = [(n + "_ref", s) for n, s in result.injections.items()] if references else []
+    rows = [(n, s.values[::int(round(s.rate_hz / rate_hz))])
+            for n, s in [*result.inputs.items(), *refs, *result.outputs.items()]]
     n = min(r.size for _, r in rows)
     return np.array([r[:n] for _, r in rows]), [name for name, _ in rows]
 
 
+def _log_late(x, names, case, rate_hz):
+    """The record with ``case.log_late``'s input logged late (held at its first value meanwhile)."""
+    if not case.log_late:
+        return x
+    x = x.copy()
+    i, k = names.index(case.log_late[0]), int(round(case.log_late[1] * rate_hz))
+    x[i] = np.concatenate([np.full(k, x[i, 0]), x[i, :-k]])
+    return x
+
+
 def _table(af: Airframe, case: Case) -> dict:
-    table = copy.deepcopy(load_case(ROOT / af.case).tables["state_space"])
-    for e in case.edit:
+    with open(ROOT / af.case, "rb") as f:      # the model only: the case's logs need not exist
+        table = tomllib.load(f)["state_space"]
+    for e in (*af.edit, *case.edit):
         if e[0] == "fix":
             table["parameters"][e[1]] = {"value": e[2], "fixed": True}
         elif e[0] == "drop":
@@ -111,16 +133,19 @@ def run_case(case: Case) -> dict:
     outputs = list(table["outputs"])
     t0 = time.perf_counter()
     sc = sweep_scenario(af.model, axes=af.inputs, repeats=2, omega_min_rad_s=af.band[0], omega_max_rad_s=af.band[1],
-                        duration_s=100.0, amplitudes=af.amplitudes, off_axis_rms=0.2, seed=case.seed, effects=effects,
+                        duration_s=af.duration_s, amplitudes=af.amplitudes, off_axis_rms=0.2, seed=case.seed, effects=effects,
                         turbulence_scale=af.turbulence if case.turbulence is None else case.turbulence)
-    x, names = _record(simulate(sc), af.rate_hz)
+    x, names = _record(simulate(sc), af.rate_hz, af.references)
+    x = _log_late(x, names, case, af.rate_hz)
+    refs = [n + "_ref" for n in af.inputs] if af.references else None
     frs = analyze(x - x.mean(axis=1, keepdims=True), names, af.rate_hz, list(af.inputs), outputs, af.band,
-                  windows_s=af.windows).best
+                  windows_s=af.windows, references=refs).best
     check = None
     if af.verification:
         vs = verification_scenario(af.model, manoeuvres=af.verification, effects=effects, seed=case.seed + 100,
                                    turbulence_scale=0.3)
         v, vn = _record(simulate(vs), af.rate_hz)
+        v = _log_late(v, vn, case, af.rate_hz)
         t = np.arange(v.shape[1]) / af.rate_hz
         u = v[[vn.index(n) for n in af.inputs]]
         y = v[[vn.index(o) for o in outputs]]
@@ -299,8 +324,37 @@ HELD_OUT = [
          (_e("actuator_lag", input="da", time_constant_s=0.12), _e("sensor_skew", output="r", delay_s=0.05)),
          {("actuator_lag", "da"), ("sensor_skew", "r")}, {"w_act_da": 1 / 0.12, "skew_r": 0.05}),
 ]
+TAU_Q = 0.02        # the quadrotor's command latency (the truth's)
+HELD_OUT += [
+    # added when the gates were already frozen: a second input-side place (cruise), and the quadrotor,
+    # an airframe the loop had never run on (attitude loop closed, 200 Hz, through the injections)
+    Case("cruise input skew 40 ms dr", "cruise", 214, (), {("sensor_skew", "dr")}, {"skew_dr": 0.04},
+         (("fix", "tau_r", TAU_R),), log_late=("dr", 0.04)),
+    Case("quad delay 25 ms roll", "quad", 201, (_e("time_delay", input="roll_cmd", delay_s=0.025),),
+         {("time_delay", "roll_cmd")}, {"tau_roll": TAU_Q + 0.025}),
+    Case("quad lag 30 ms pitch", "quad", 202, (_e("actuator_lag", input="pitch_cmd", time_constant_s=0.03),),
+         {("actuator_lag", "pitch_cmd")}, {"w_act_pitch_cmd": 1 / 0.03}),
+    Case("quad 2nd-order 25 rad/s zeta 0.5 roll", "quad", 203,
+         (_e("actuator_second_order", input="roll_cmd", omega_rad_s=25.0, zeta=0.5),),
+         {("actuator_second_order", "roll_cmd")}, {"wn_act_roll_cmd": 25.0, "zeta_act_roll_cmd": 0.5}),
+    Case("quad notch 15 rad/s depth 0.8 pitch", "quad", 204,
+         (_e("notch_filter", input="pitch_cmd", omega_rad_s=15.0, zeta=0.2, depth=0.8),), {("notch_filter", "pitch_cmd")},
+         {"w_notch_pitch_cmd": 15.0, "zeta_notch_pitch_cmd": 0.2, "depth_notch_pitch_cmd": 0.8}),
+    Case("quad mode q 30 rad/s zeta 0.05/0.15", "quad", 205,
+         (_e("structural_mode", output="q", omega_rad_s=30.0, zeta_pole=0.05, zeta_zero=0.15),),
+         {("structural_mode", "q")}, {"w_mode_q": 30.0, "zeta_mode_q": 0.05, "zeta_zero_mode_q": 0.15}),
+    Case("quad skew 30 ms phi", "quad", 206, (_e("sensor_skew", output="phi", delay_s=0.03),), {("sensor_skew", "phi")},
+         {"skew_phi": 0.03}),
+    Case("quad missing Mu", "quad", 207, (), {("missing_derivative", "F[q][u]")}, {"F_q_u": 0.65},
+         (("drop", "F", "q", "u", "Mu"),)),
+    Case("quad mode p + lag pitch", "quad", 208,
+         (_e("structural_mode", output="p", omega_rad_s=25.0, zeta_pole=0.06, zeta_zero=0.2),
+          _e("actuator_lag", input="pitch_cmd", time_constant_s=0.04)),
+         {("structural_mode", "p"), ("actuator_lag", "pitch_cmd")}, {"w_mode_p": 25.0, "w_act_pitch_cmd": 25.0}),
+]
 HELD_OUT_CLEAN = ([Case(f"clean cruise seed {s}", "cruise", s) for s in range(220, 228)]
                   + [Case(f"clean hover seed {s}", "hover", s) for s in range(220, 227)]
+                  + [Case(f"clean quad seed {s}", "quad", s) for s in range(220, 225)]
                   + [Case("clean cruise calm air", "cruise", 228, turbulence=0.0),
                      Case("clean cruise full turbulence", "cruise", 229, turbulence=1.0)])
 
