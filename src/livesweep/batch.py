@@ -1,7 +1,7 @@
 """``livesweep batch``: many identifications in parallel, resumable, locally or on a Dask cluster.
 
-Each case runs ``livesweep identify CASE --out DIR/<case-name>`` in-process (the same
-:func:`livesweep.cli.cmd_identify`, its console output going to ``DIR/<case-name>/identify.log``)
+Each case runs :func:`livesweep.identify` and :func:`livesweep.report.writer.write_report` into
+``DIR/<case-name>`` in-process (its progress and summary going to ``DIR/<case-name>/identify.log``)
 inside one function, :func:`run_one`, which a local process pool and a Dask cluster both call.
 A case that finished is fingerprinted (case file, stage, livesweep version, every log it names)
 in ``DIR/<case-name>/batch.json``; the next run skips it while the fingerprint still matches.
@@ -10,8 +10,8 @@ rewritten, so partial results survive a crash.
 
 This is an edge module (files, processes, a cluster); the numerical core is untouched.
 A Dask cluster must see the same file system as this machine (case files, logs and ``DIR`` at the
-same paths) and should run one thread per worker process (``nthreads=1``): one identification at
-a time runs per process anyway (matplotlib's pyplot and the console redirection are per process).
+same paths) and should run one thread per worker process (``nthreads=1``): BLAS is the parallelism
+inside one identification.
 """
 
 from __future__ import annotations
@@ -23,7 +23,6 @@ import json
 import os
 import re
 import tempfile
-import threading
 import time
 import tomllib
 import traceback
@@ -34,8 +33,9 @@ from livesweep.convert.common import sha256_of
 from livesweep.errors import ConfigError
 from livesweep.locks import folder_lock
 from livesweep.numbers import finite_or_none as _finite_or_none
+from livesweep.pipeline import STAGES
 
-__all__ = ["find_cases", "fingerprint", "run_one", "run_batch", "summarize_report", "format_table",
+__all__ = ["find_cases", "fingerprint", "run_one", "run_batch", "summarize", "format_table",
            "add_batch_arguments", "cmd_batch", "BATCH_FILE", "LOG_FILE", "SUMMARY_JSON", "SUMMARY_TXT"]
 
 BATCH_FILE = "batch.json"
@@ -48,7 +48,6 @@ _CASE_HEADER = re.compile(r"^\s*\[\s*case\s*\]", re.MULTILINE)
 #: content hash of a log by (resolved path, size, mtime_ns); cleared at the start of every run_batch
 _LOG_HASHES: dict[tuple[str, int, int], str] = {}
 #: one identification at a time per process (pyplot and sys.stdout are process-wide)
-_RUN_LOCK = threading.Lock()
 
 
 # --------------------------------------------------------------------------------------------
@@ -205,34 +204,31 @@ def fingerprint(case_path, stage: str = _DEFAULT_STAGE) -> str:
 
 
 
-def summarize_report(report: dict) -> dict:
-    """The summary numbers of one ``report.json`` (DESIGN.md §4.3).
+def summarize(ident) -> dict:
+    """The summary numbers of one :class:`~livesweep.pipeline.identify.Identification`.
 
     Returns
     -------
     dict
         ``pairs`` (number of frequency responses), ``band_rad_s`` (``{"out/in": [lo, hi] or None}``,
-        the widest band with gamma^2 >= 0.6 and eps_r <= 0.2, from ``data_quality.excitation``),
-        ``J`` (state-space J_ave, else the worst transfer-function cost, else None), ``TIC`` (the
-        largest Theil inequality coefficient over every verification record and output, or None)
-        and ``residual`` (the residual loop's conclusion, or None).
+        the widest band with gamma^2 >= 0.6 and eps_r <= 0.2), ``J`` (state-space J_ave, else the
+        worst transfer-function cost, else None), ``TIC`` (the largest Theil inequality coefficient
+        over every verification record and output, or None) and ``residual`` (the residual loop's
+        conclusion, or None).
     """
-    band = {f"{e.get('output')}/{e.get('input')}": (list(e["widest_band_rad_s"]) if e.get("widest_band_rad_s") else None)
-            for e in (report.get("data_quality") or {}).get("excitation") or []}
+    band = {f"{a.output}/{a.input}": (list(a.widest_band_rad_s) if a.widest_band_rad_s else None)
+            for a in ident.frequency_response.adequacy}
     J = None
-    ss = report.get("state_space")
-    if isinstance(ss, dict):
-        J = _finite_or_none((ss.get("cost") or {}).get("average"))
-    if J is None:
-        costs = [c for c in (_finite_or_none(t.get("cost")) for t in report.get("transfer_functions") or []) if c is not None]
+    if ident.state_space is not None:
+        J = _finite_or_none(ident.state_space.fit.cost_average)
+    if J is None and ident.transfer_functions is not None:
+        costs = [c for c in (_finite_or_none(f.cost) for f in ident.transfer_functions.fits) if c is not None]
         J = max(costs) if costs else None
-    ver = report.get("verification") or {}
-    records = ver.get("records") or ([ver] if ver else [])
-    tics = [t for r in records for t in (_finite_or_none(o.get("tic")) for o in r.get("outputs") or []) if t is not None]
-    rl = report.get("residual_loop")
-    return {"pairs": len(report.get("frequency_responses") or []), "band_rad_s": band,
-            "J": J, "TIC": max(tics) if tics else None,
-            "residual": rl.get("conclusion") if isinstance(rl, dict) else None}
+    tics = [t for _, v in (ident.verification.results if ident.verification else ())
+            for t in (_finite_or_none(o.tic) for o in v.outputs) if t is not None]
+    return {"pairs": len(list(ident.responses.pairs())), "band_rad_s": band, "J": J,
+            "TIC": max(tics) if tics else None,
+            "residual": ident.residual.loop.conclusion if ident.residual is not None else None}
 
 
 def _row(case_path, name, folder, out_dir, status, *, error=None, seconds=0.0, stage=_DEFAULT_STAGE, summary=None):
@@ -273,14 +269,11 @@ def _skip_row(case_path: Path, name: str, folder: str, out_dir: Path, stage: str
     t0 = time.monotonic()
     case_dir = out_dir / folder
     info = _read_batch_file(case_dir)
-    if not info or info.get("fingerprint") != fp or info.get("status") != "ok":
+    if not info or info.get("fingerprint") != fp or info.get("status") != "ok" or not (case_dir / "report.json").is_file():
         return None
-    try:
-        report = json.loads((case_dir / "report.json").read_text())
-    except (OSError, ValueError):
-        return None
+    stored = info.get("row") if isinstance(info.get("row"), dict) else {}
     return _row(case_path, name, folder, out_dir, "skipped", seconds=time.monotonic() - t0, stage=stage,
-                summary=summarize_report(report))
+                summary={k: stored.get(k) for k in ("pairs", "band_rad_s", "J", "TIC", "residual")})
 
 
 def _write_batch_file(case_dir: Path, case_path: Path, fp: str | None, row: dict) -> None:
@@ -293,7 +286,7 @@ def _write_batch_file(case_dir: Path, case_path: Path, fp: str | None, row: dict
 
 
 def run_one(case_path, out_dir, stage: str = _DEFAULT_STAGE, folder: str | None = None, force: bool = False,
-            fp: str | None = None) -> dict:
+            fp: str | None = None, plots: bool = True) -> dict:
     """Identify one case into ``out_dir/<folder>``, in this process; never raises.
 
     Parameters
@@ -303,7 +296,7 @@ def run_one(case_path, out_dir, stage: str = _DEFAULT_STAGE, folder: str | None 
     out_dir : str or Path
         The batch folder; the case's report goes to ``out_dir/<folder>``.
     stage : str
-        Last stage to run (``livesweep.cli.STAGES``).
+        Last stage to run (``livesweep.pipeline.STAGES``).
     folder : str, optional
         The case's folder name (:func:`run_batch` assigns unique ones); default the case name made
         file-system safe.
@@ -311,56 +304,61 @@ def run_one(case_path, out_dir, stage: str = _DEFAULT_STAGE, folder: str | None 
         Run even when ``batch.json`` there holds this case's current fingerprint and a report.
     fp : str, optional
         The case's :func:`fingerprint`, when the caller computed it already.
+    plots : bool
+        False writes the reports without plots (faster; ``report.json`` is the same).
 
     Returns
     -------
     dict
         ``{case, name, out, stage, status ("ok", "skipped" or "failed"), error (one line, failed
-        only), seconds, pairs, band_rad_s, J, TIC, residual}`` (see :func:`summarize_report`).
+        only), seconds, pairs, band_rad_s, J, TIC, residual}`` (see :func:`summarize`).
     """
     t0 = time.monotonic()
     case_path, out_dir = Path(case_path).resolve(), Path(out_dir).resolve()
     name = _case_name(case_path)
     folder = folder or _safe_name(name)
     case_dir = out_dir / folder
-    with _RUN_LOCK:
-        try:
-            if fp is None:
-                fp = fingerprint(case_path, stage)
-            if not force:
-                skipped = _skip_row(case_path, name, folder, out_dir, stage, fp)
-                if skipped is not None:
-                    return skipped
-            from livesweep.cli import STAGES
-            if stage not in STAGES:
-                raise ConfigError(f"stage {stage!r} is not one of {', '.join(STAGES)}")
-            case_dir.mkdir(parents=True, exist_ok=True)
-            (case_dir / BATCH_FILE).unlink(missing_ok=True)   # no stale "done" while this run is under way
-        except Exception as exc:  # noqa: BLE001 - a batch reports every failure as a row
-            row = _row(case_path, name, folder, out_dir, "failed", error=_one_line(exc),
-                       seconds=time.monotonic() - t0, stage=stage)
-            _write_log_and_batch(case_dir, case_path, None, row, traceback.format_exc())
-            return row
-        try:
-            with open(case_dir / LOG_FILE, "w", buffering=1) as log:
-                try:
-                    with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
-                        from livesweep.cli import cmd_identify
-                        code = cmd_identify(argparse.Namespace(case=str(case_path), out=str(case_dir), stage=stage))
-                    if code != 0:
-                        raise RuntimeError(f"identify exited with code {code}")
-                    report = json.loads((case_dir / "report.json").read_text())
-                    row = _row(case_path, name, folder, out_dir, "ok", seconds=time.monotonic() - t0, stage=stage,
-                               summary=summarize_report(report))
-                except Exception as exc:  # noqa: BLE001
-                    log.write("\n" + traceback.format_exc())
-                    row = _row(case_path, name, folder, out_dir, "failed", error=_one_line(exc),
-                               seconds=time.monotonic() - t0, stage=stage)
-        except OSError as exc:                                  # the log itself cannot be written
-            row = _row(case_path, name, folder, out_dir, "failed", error=_one_line(exc),
-                       seconds=time.monotonic() - t0, stage=stage)
-        _write_batch_file(case_dir, case_path, fp, row)
+    try:
+        if fp is None:
+            fp = fingerprint(case_path, stage)
+        if not force:
+            skipped = _skip_row(case_path, name, folder, out_dir, stage, fp)
+            if skipped is not None:
+                return skipped
+        if stage not in STAGES:
+            raise ConfigError(f"stage {stage!r} is not one of {', '.join(STAGES)}")
+        case_dir.mkdir(parents=True, exist_ok=True)
+        (case_dir / BATCH_FILE).unlink(missing_ok=True)   # no stale "done" while this run is under way
+    except Exception as exc:  # noqa: BLE001 - a batch reports every failure as a row
+        row = _row(case_path, name, folder, out_dir, "failed", error=_one_line(exc),
+                   seconds=time.monotonic() - t0, stage=stage)
+        _write_log_and_batch(case_dir, case_path, None, row, traceback.format_exc())
         return row
+    try:
+        with open(case_dir / LOG_FILE, "w", buffering=1) as log:
+            try:
+                from livesweep.pipeline.identify import identify
+                from livesweep.report.console import summary_lines
+                from livesweep.report.writer import write_report
+
+                def progress(msg):
+                    log.write(f"[{time.monotonic() - t0:6.1f} s] {msg}\n")
+
+                ident = identify(case_path, until=stage, progress=progress)
+                progress("writing the report" + ("" if plots else " (no plots)"))
+                path = write_report(ident, case_dir, plots=plots)
+                log.write("\n".join(summary_lines(ident)) + f"\nwrote {path} and {path.parent / 'report.html'}\n")
+                row = _row(case_path, name, folder, out_dir, "ok", seconds=time.monotonic() - t0, stage=stage,
+                           summary=summarize(ident))
+            except Exception as exc:  # noqa: BLE001
+                log.write("\n" + traceback.format_exc())
+                row = _row(case_path, name, folder, out_dir, "failed", error=_one_line(exc),
+                           seconds=time.monotonic() - t0, stage=stage)
+    except OSError as exc:                                  # the log itself cannot be written
+        row = _row(case_path, name, folder, out_dir, "failed", error=_one_line(exc),
+                   seconds=time.monotonic() - t0, stage=stage)
+    _write_batch_file(case_dir, case_path, fp, row)
+    return row
 
 
 def _write_log_and_batch(case_dir: Path, case_path: Path, fp, row: dict, text: str) -> None:
@@ -423,7 +421,7 @@ def _mp_context():
     return mp.get_context("forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn")
 
 
-def _run_local(jobs, out_dir, stage, force, workers, finish):
+def _run_local(jobs, out_dir, stage, force, workers, finish, plots=True):
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from concurrent.futures.process import BrokenProcessPool
 
@@ -437,7 +435,7 @@ def _run_local(jobs, out_dir, stage, force, workers, finish):
 
     ex = pool(n)
     try:
-        futs = {ex.submit(run_one, str(c), str(out_dir), stage, folder, force, fp): (k, c, name, folder)
+        futs = {ex.submit(run_one, str(c), str(out_dir), stage, folder, force, fp, plots): (k, c, name, folder)
                 for k, c, name, folder, fp in jobs}
         for fut in as_completed(futs):
             k, c, name, folder = futs[fut]
@@ -456,14 +454,14 @@ def _run_local(jobs, out_dir, stage, force, workers, finish):
     for k, c, name, folder, fp in sorted(crashed):
         with pool(1) as ex1:
             try:
-                row = ex1.submit(run_one, str(c), str(out_dir), stage, folder, force, fp).result()
+                row = ex1.submit(run_one, str(c), str(out_dir), stage, folder, force, fp, plots).result()
             except Exception as exc:  # noqa: BLE001
                 row = _row(c, name, folder, out_dir, "failed", stage=stage,
                            error=f"the worker process died: {_one_line(exc)}")
         finish(k, row)
 
 
-def _run_dask(jobs, out_dir, stage, force, address, finish):
+def _run_dask(jobs, out_dir, stage, force, address, finish, plots=True):
     try:
         from distributed import Client, as_completed
     except ImportError:
@@ -473,7 +471,7 @@ def _run_dask(jobs, out_dir, stage, force, address, finish):
     except (OSError, TimeoutError, ValueError) as exc:
         raise ConfigError(f"--dask {address!r}: cannot connect to the Dask scheduler: {exc}") from None
     with client:
-        cols = list(zip(*[(str(c), str(out_dir), stage, folder, force, fp) for _, c, _, folder, fp in jobs]))
+        cols = list(zip(*[(str(c), str(out_dir), stage, folder, force, fp, plots) for _, c, _, folder, fp in jobs]))
         futs = client.map(run_one, *cols, pure=False)
         where = {f.key: job for f, job in zip(futs, jobs)}
         for fut in as_completed(futs):
@@ -487,7 +485,7 @@ def _run_dask(jobs, out_dir, stage, force, address, finish):
 
 
 def run_batch(cases, out_dir, *, stage: str = _DEFAULT_STAGE, workers: int | None = None,
-              dask_address: str | None = None, progress=None, force: bool = False) -> list[dict]:
+              dask_address: str | None = None, progress=None, force: bool = False, plots: bool = True) -> list[dict]:
     """Identify many cases in parallel into ``out_dir/<case-name>``; resumable.
 
     Parameters
@@ -497,7 +495,7 @@ def run_batch(cases, out_dir, *, stage: str = _DEFAULT_STAGE, workers: int | Non
     out_dir : str or Path
         The batch folder (created). Holds one folder per case, ``summary.json`` and ``summary.txt``.
     stage : str
-        Last stage to run for every case (``livesweep.cli.STAGES``).
+        Last stage to run for every case (``livesweep.pipeline.STAGES``).
     workers : int, optional
         Local worker processes (default: the number of CPUs). Ignored with ``dask_address``.
     dask_address : str, optional
@@ -506,6 +504,8 @@ def run_batch(cases, out_dir, *, stage: str = _DEFAULT_STAGE, workers: int | Non
         ``progress(done, total, row)`` after every finished (or skipped) case.
     force : bool
         Run every case, even those whose stored fingerprint is current.
+    plots : bool
+        False writes every report without plots (faster; ``report.json`` is the same).
 
     Returns
     -------
@@ -519,8 +519,6 @@ def run_batch(cases, out_dir, *, stage: str = _DEFAULT_STAGE, workers: int | Non
         installed or no scheduler at ``dask_address``. A failing case never raises: its row says
         ``failed`` and why.
     """
-    from livesweep.cli import STAGES
-
     if stage not in STAGES:
         raise ConfigError(f"stage {stage!r} is not one of {', '.join(STAGES)}")
     if workers is not None and workers < 1:
@@ -534,10 +532,10 @@ def run_batch(cases, out_dir, *, stage: str = _DEFAULT_STAGE, workers: int | Non
     if not os.access(out_dir, os.W_OK):
         raise ConfigError(f"--out {str(out_dir)!r} is not writable")
     with folder_lock(out_dir):
-        return _run_locked(cases, out_dir, stage, workers, dask_address, progress, force)
+        return _run_locked(cases, out_dir, stage, workers, dask_address, progress, force, plots)
 
 
-def _run_locked(cases, out_dir, stage, workers, dask_address, progress, force) -> list[dict]:
+def _run_locked(cases, out_dir, stage, workers, dask_address, progress, force, plots=True) -> list[dict]:
     """:func:`run_batch` once the batch folder is made and locked."""
     _LOG_HASHES.clear()
     folders = _assign_folders(cases, out_dir)
@@ -572,9 +570,9 @@ def _run_locked(cases, out_dir, stage, workers, dask_address, progress, force) -
             jobs.append((k, case, name, folder, fp))
     if jobs:
         if dask_address:
-            _run_dask(jobs, out_dir, stage, force, dask_address, finish)
+            _run_dask(jobs, out_dir, stage, force, dask_address, finish, plots)
         else:
-            _run_local(jobs, out_dir, stage, force, workers, finish)
+            _run_local(jobs, out_dir, stage, force, workers, finish, plots)
     if not rows:
         _write_summary(out_dir, [])
     return rows  # type: ignore[return-value]
@@ -587,8 +585,6 @@ def _run_locked(cases, out_dir, stage, workers, dask_address, progress, force) -
 
 def add_batch_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Arguments of ``livesweep batch`` on ``parser`` (a subparser); sets ``func=cmd_batch``."""
-    from livesweep.cli import STAGES
-
     parser.add_argument("cases", nargs="+", help="case files (TOML) or folders of them")
     parser.add_argument("--out", required=True, help="batch folder: one report folder per case, summary.json, summary.txt")
     parser.add_argument("--workers", type=int, help="local worker processes (default: one per CPU)")
@@ -597,6 +593,8 @@ def add_batch_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentPar
     parser.add_argument("--stage", default=_DEFAULT_STAGE, choices=list(STAGES),
                         help="last stage to run (default: every stage each case defines)")
     parser.add_argument("--force", action="store_true", help="re-run cases whose results are current")
+    parser.add_argument("--no-plots", dest="plots", action="store_false",
+                        help="write the reports without plots (report.json is the same; about half the time)")
     parser.set_defaults(func=cmd_batch)
     return parser
 
@@ -618,7 +616,7 @@ def cmd_batch(args) -> int:
         print(f"[{done:{width}d}/{total}] {row['name']} {row['status']} ({row['seconds']:.1f} s){extra}", flush=True)
 
     rows = run_batch(cases, args.out, stage=args.stage, workers=args.workers, dask_address=args.dask,
-                     progress=progress, force=args.force)
+                     progress=progress, force=args.force, plots=args.plots)
     print()
     print(format_table(rows), end="")
     out = Path(args.out)

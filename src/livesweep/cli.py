@@ -16,6 +16,7 @@ from pathlib import Path
 
 from livesweep import __version__
 from livesweep.errors import ConfigError, LivesweepError
+from livesweep.pipeline import STAGES  # the stage names only: the stages load when a command runs
 
 EXIT_USAGE = 2
 
@@ -207,9 +208,6 @@ def cmd_demo(args) -> int:
     return cmd_identify(argparse.Namespace(case=str(case), out=str(out_dir / "report"), stage="residual-loop"))
 
 
-STAGES = ("frequency-response", "transfer-functions", "state-space", "verification", "residual-loop")
-
-
 def cmd_identify(args) -> int:
     """Identify from a case file: frequency responses, then (as the case defines them) transfer
     functions, state-space derivatives and time-domain verification."""
@@ -222,87 +220,24 @@ def cmd_identify(args) -> int:
 
 
 def _identify(args, case) -> int:
-    """The stages of ``cmd_identify`` (the output folder is prepared and locked)."""
+    """Run :func:`livesweep.identify` on the case (the output folder is prepared and locked), write
+    its report and print its summary."""
     import time
 
-    from livesweep.pipeline.frequency_response import run_frequency_response_stage
-    from livesweep.pipeline.parametric import (run_state_space_stage, run_transfer_function_stage,
-                                               run_verification_stage)
-    from livesweep.pipeline.residual import residual_settings, run_residual_stage
-    from livesweep.report.writer import write_frequency_report
+    from livesweep.pipeline.identify import identify
+    from livesweep.report.writer import write_report
 
-    if case.tables.get("state_space"):          # bad model tables fail before any work
-        from livesweep.ident.state_space import StateSpaceModel
-
-        StateSpaceModel.from_table(case.tables["state_space"], where=f"{case.path}: state_space")
-        residual_settings(case)
-    last = STAGES.index(args.stage)
     t0 = time.monotonic()
 
     def progress(msg):
         print(f"[{time.monotonic() - t0:6.1f} s] {msg}", flush=True)
 
-    progress(f"{case.name}: frequency responses from {len(case.identify)} record(s)")
-    stage = run_frequency_response_stage(case)
-    best = stage.analysis.best
-    tf = ss = ver = res = None
-    if last >= 1 and case.tables.get("transfer_functions"):
-        progress(f"transfer functions: {', '.join(case.tables['transfer_functions'])}")
-        tf = run_transfer_function_stage(case, best)
-    if last >= 2 and case.tables.get("state_space"):
-        ss = run_state_space_stage(case, best, progress=progress)
-    if last >= 3 and ss is not None and case.verify:
-        progress(f"verification on {len(case.verify)} record(s)")
-        ver = run_verification_stage(case, ss, case.spectral.sample_rate_hz)
-    if last >= 4 and ss is not None:
-        progress("residual loop: diagnosing what the model lacks")
-        res = run_residual_stage(case, best, ss, runner=ver.runner if ver else None, progress=progress)
-    progress("writing the report")
-    path = write_frequency_report(stage, args.out, transfer_functions=tf, state_space=ss, verification=ver,
-                                  residual=res)
-    dq = stage.data_quality
-    print(f"{case.name}: {len(best.outputs)} outputs x {len(best.inputs)} inputs, "
-          f"{'MISO-conditioned' if best.conditioned else 'SISO'} composite of windows {best.settings['windows_s']} s "
-          f"over {dq['duration_s']:.0f} s at {dq['sample_rate_hz']:g} Hz")
-    print(f"  {'pair':12s} {'adequate':>9s}  widest band gamma^2>=0.6, eps<=0.2 [rad/s]")
-    for a in stage.adequacy:
-        band = "-" if a.widest_band_rad_s is None else "%.2f .. %.2f" % a.widest_band_rad_s
-        print(f"  {a.output + '/' + a.input:12s} {100 * a.fraction:8.0f}%  {band}")
-    for c in dq["kinematic_checks"]:
-        if "error" in c:
-            print(f"  kinematic check {c['measured']} vs {c['reconstructed_from']}: not run ({c['error']})")
-        else:
-            print(f"  kinematic check {c['name']}: scale {c['scale_factor_error']:+.3f}, skew {1000 * c['skew_s']:+.0f} ms, "
-                  f"rate bias {c['rate_bias']:+.3f} {c['rate_bias_units']}: {'pass' if c['passed'] else 'FAIL'}")
-    repaired = {n: r for n, r in dq["repairs"].items() if any(r.values())}
-    wild = {n: w["replaced"] for n, w in dq["wild_points"].items() if w["replaced"]}
-    if repaired or wild:
-        print(f"  repairs: {repaired or 'none'}; wild points replaced: {wild or 'none'}")
-    for f in (tf.fits if tf else ()):
-        print(f"  transfer function {f.name}: gain {f.gain:.4g}, delay {1000 * f.delay_s:.1f} ms, J {f.cost:.1f}"
-              + ("" if f.converged else " (NOT CONVERGED)"))
-    if ss is not None:
-        fit = ss.fit
-        worst = max((p.cramer_rao_pct for p in fit.parameters if not p.fixed and p.cramer_rao_pct is not None),
-                    default=float("nan"))
-        print(f"  state space: J_ave {fit.cost_average:.1f}, {sum(not p.fixed for p in fit.parameters)} free parameters "
-              f"(worst CR {worst:.0f}%), removed {', '.join(fit.removed_parameters) or 'none'}"
-              + ("" if fit.converged else " (NOT CONVERGED)"))
-    for label, v in (ver.results if ver else ()):
-        print(f"  verification {label}: J_rms {v.j_rms:.3f}, TIC "
-              + ", ".join(f"{o.name} {o.tic:.3f}" for o in v.outputs) + (": pass" if v.passed else ": FAIL"))
-    if res is not None:
-        from livesweep.ident.residual import effect_text
+    ident = identify(case, until=args.stage, progress=progress)
+    progress("writing the report" + ("" if getattr(args, "plots", True) else " (no plots)"))
+    path = write_report(ident, args.out, plots=getattr(args, "plots", True))
+    from livesweep.report.console import summary_lines
 
-        loop = res.loop
-        print(f"  residual loop: {loop.conclusion} ({loop.n_fits} re-identifications)")
-        for st in loop.steps:
-            if st.effect is not None:
-                ver_txt = (f", verification J_rms {st.verification_before['j_rms']:.3f} -> {st.verification_after['j_rms']:.3f}"
-                           if st.verification_before and st.verification_after else "")
-                print(f"    + {effect_text(st.effect)}; J_ave {st.cost_before:.2f} -> {st.cost_after:.2f}{ver_txt}")
-    for note in dq["notes"]:
-        print(f"  note: {note}")
+    print("\n".join(summary_lines(ident)))
     print(f"wrote {path} and {path.parent / 'report.html'}")
     return 0
 
@@ -639,6 +574,8 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--out", required=True, help="folder for the report")
     i.add_argument("--stage", default="residual-loop", choices=list(STAGES),
                    help="last stage to run (default: every stage the case defines)")
+    i.add_argument("--no-plots", dest="plots", action="store_false",
+                   help="skip the PNG plots (report.json is the same; about half the time)")
     i.set_defaults(func=cmd_identify)
 
     mp = sub.add_parser("maps", help="list the channel-map presets for real vehicles (for monitor/replay --map NAME)")

@@ -180,6 +180,63 @@ class StateSpaceModel:
     # --- construction ---------------------------------------------------------------------
 
     @classmethod
+    def from_matrices(cls, *, states, inputs, outputs, F, G, H, M=None, J=None, parameters=None,
+                      constants=None, delays=None, output_delays=None, where: str = "") -> "StateSpaceModel":
+        """Build a model from matrices whose entries are numbers or expressions of parameters.
+
+        The notebook form of :meth:`from_table` (the same checks and messages).
+
+        Parameters
+        ----------
+        states, inputs, outputs : sequence of str
+        F, G, H : array_like, shapes (n, n), (n, m), (p, n)
+            Entries are numbers, or strings: a parameter or constant name or an arithmetic
+            expression of them (``"Lp"``, ``"-g"``, ``"Yv*r2d"``).
+        M, J : array_like, optional
+            Shapes (n, n) and (p, m); default identity and zero.
+        parameters : mapping, optional
+            Name -> initial value (free), or ``{"value": v, "fixed": True}``.
+        constants : mapping, optional
+            Name -> number.
+        delays, output_delays : mapping, optional
+            Input (output) name -> parameter or constant name, or a number [s].
+        where : str
+            Prefix for messages.
+
+        Returns
+        -------
+        StateSpaceModel
+
+        Examples
+        --------
+        >>> from livesweep.ident.state_space import StateSpaceModel
+        >>> m = StateSpaceModel.from_matrices(states=["p"], inputs=["da"], outputs=["p"],
+        ...                                   F=[["Lp"]], G=[["Lda"]], H=[[1.0]],
+        ...                                   parameters={"Lp": -2.0, "Lda": 5.0})
+        >>> m.parameters
+        ('Lp', 'Lda')
+        """
+        def rows(name, a):
+            if a is None:
+                return None
+            arr = np.asarray(a, dtype=object)
+            if arr.ndim != 2:
+                raise ConfigError(f"{where + ': ' if where else ''}{name} must be a 2-D matrix, got shape {arr.shape}")
+            return [[e if isinstance(e, str) else repr(float(e)) for e in row] for row in arr.tolist()]
+
+        table = {"states": list(states), "inputs": list(inputs), "outputs": list(outputs),
+                 "F": rows("F", F), "G": rows("G", G), "H": rows("H", H),
+                 "parameters": {k: (dict(v) if isinstance(v, dict) else {"value": float(v)})
+                                for k, v in (parameters or {}).items()}}
+        for key, val in (("M", M), ("J", J)):
+            if val is not None:
+                table[key] = rows(key, val)
+        for key, val in (("constants", constants), ("delays", delays), ("output_delays", output_delays)):
+            if val:
+                table[key] = dict(val)
+        return cls.from_table(table, where=where)
+
+    @classmethod
     def from_table(cls, table: dict, where: str = "") -> "StateSpaceModel":
         """Build and validate a model from a case's ``[state_space]`` table (DESIGN.md §4.2).
 
@@ -718,6 +775,21 @@ class StateSpaceFit:
     def frequency_response(self, omega) -> np.ndarray:
         """Identified model's response ``(n_outputs, n_inputs, n_freq)`` at ``omega`` [rad/s]."""
         return self.model.frequency_response(self.theta, omega)
+
+    def matrices(self) -> dict:
+        """``A = M^-1 F``, ``B = M^-1 G``, ``C = H``, ``D = J`` at the fitted values (new arrays),
+        with ``states``, ``inputs``, ``outputs`` and the input delays ``tau_s`` [s]."""
+        M, F, G, H, J, tau = self.model.matrices(self.theta)
+        return {"A": np.linalg.solve(M, F), "B": np.linalg.solve(M, G), "C": np.array(H), "D": np.array(J),
+                "tau_s": np.array(tau, float), "states": self.model.states, "inputs": self.model.inputs,
+                "outputs": self.model.outputs}
+
+    def to_ss(self, *, pade_order: int | None = None):
+        """This model as ``control.StateSpace`` (needs python-control); delays left out unless
+        ``pade_order`` is given. See :func:`livesweep.interop.state_space_to_ss`."""
+        from livesweep.interop import state_space_to_ss
+
+        return state_space_to_ss(self, pade_order=pade_order)
 
     def to_dict(self) -> dict:
         """The ``report.json`` ``state_space`` form (DESIGN.md §4.3), JSON-ready (non-finite -> null)."""

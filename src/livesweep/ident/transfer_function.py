@@ -357,6 +357,13 @@ class FittedTransferFunction:
                 T = T / (s - p)
             return T * np.exp(-s * self.delay_s)
 
+    def to_tf(self, *, pade_order: int | None = None):
+        """This fit as ``control.TransferFunction`` (needs python-control); the delay is left out
+        unless ``pade_order`` is given. See :func:`livesweep.interop.transfer_function_to_tf`."""
+        from livesweep.interop import transfer_function_to_tf
+
+        return transfer_function_to_tf(self, pade_order=pade_order)
+
     def to_dict(self) -> dict:
         """The ``report.json`` entry (DESIGN.md §4.3): roots as ``[re, im]`` pairs [rad/s]."""
         return {

@@ -1,34 +1,42 @@
-"""Report plots (matplotlib, headless): Bode magnitude, phase and coherence per pair."""
+"""Report plots: Bode magnitude, phase and coherence per pair, verification time histories and
+residual-loop steps.
+
+Each ``*_figure`` function returns a :class:`matplotlib.figure.Figure` built without pyplot, so it
+neither needs nor changes the matplotlib backend (inline plots in a notebook keep working; show one
+with ``display(fig)`` or save it with ``fig.savefig``). The ``*_plot`` functions write the figure
+as a PNG for the report.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
 import matplotlib.ticker
+import numpy as np
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from livesweep.spectral.response import FrequencyResponse
 
-from livesweep.spectral.response import FrequencyResponse  # noqa: E402
-
-__all__ = ["bode_plot", "time_history_plot", "residual_plot"]
+__all__ = ["bode_figure", "bode_plot", "time_history_figure", "time_history_plot", "residual_figure",
+           "residual_plot"]
 
 ADEQUATE_COHERENCE = 0.6
 
 
-def bode_plot(response: FrequencyResponse, path, *, title: str = "", units: tuple[str, str] = ("", ""),
-              ordinary: FrequencyResponse | None = None, models: list | None = None,
-              fit_band_rad_s: tuple | None = None) -> Path:
-    """Write a PNG with magnitude [dB], phase [deg] and coherence against frequency [rad/s].
+def bode_plot(response: FrequencyResponse, path, **kwargs) -> Path:
+    """Write :func:`bode_figure` of ``response`` as a PNG at ``path``; returns the path."""
+    return _save(bode_figure(response, **kwargs), path, dpi=90)
+
+
+def bode_figure(response: FrequencyResponse, *, title: str = "", units: tuple[str, str] = ("", ""),
+                ordinary: FrequencyResponse | None = None, models: list | None = None,
+                fit_band_rad_s: tuple | None = None) -> Figure:
+    """Magnitude [dB], phase [deg] and coherence against frequency [rad/s], one pair.
 
     Parameters
     ----------
     response : FrequencyResponse
         The response to plot (conditioned or ordinary).
-    path : str or Path
-        PNG to write.
     title : str
     units : (str, str)
         Output and input units, for the magnitude label.
@@ -41,14 +49,13 @@ def bode_plot(response: FrequencyResponse, path, *, title: str = "", units: tupl
 
     Returns
     -------
-    Path
+    matplotlib.figure.Figure
     """
-    path = Path(path)
     w = response.omega
     eps = np.where(np.isfinite(response.random_error), response.random_error, np.nan)
     mag, ph = response.magnitude_db, response.phase_deg
-    fig, (a1, a2, a3) = plt.subplots(3, 1, figsize=(7.5, 8.0), sharex=True,
-                                     gridspec_kw={"height_ratios": [3, 3, 1.6]})
+    fig = Figure(figsize=(7.5, 8.0))
+    a1, a2, a3 = fig.subplots(3, 1, sharex=True, gridspec_kw={"height_ratios": [3, 3, 1.6]})
     label = "conditioned (MISO)" if response.conditioned else "composite"
     a1.semilogx(w, mag, "C0", lw=1.6, label=label)
     a1.fill_between(w, mag - 8.69 * eps, mag + 8.69 * eps, color="C0", alpha=0.15, lw=0, label="±1 random error")
@@ -80,17 +87,36 @@ def bode_plot(response: FrequencyResponse, path, *, title: str = "", units: tupl
     a3.legend(fontsize=8, loc="lower left")
     fig.suptitle(title or f"{response.output} / {response.input}")
     fig.subplots_adjust(left=0.12, right=0.97, top=0.94, bottom=0.07, hspace=0.08)   # tight_layout draws twice
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return fig
 
 
-def time_history_plot(t_s, measured, predicted, inputs, names, units, input_names, path, *, title: str = "",
-                      tic=None) -> Path:
-    """Verification plot: measured (solid) and model (dashed) outputs, and the inputs, against time [s]."""
-    path = Path(path)
+def time_history_plot(t_s, measured, predicted, inputs, names, units, input_names, path, **kwargs) -> Path:
+    """Write :func:`time_history_figure` as a PNG at ``path``; returns the path."""
+    return _save(time_history_figure(t_s, measured, predicted, inputs, names, units, input_names, **kwargs), path,
+                 dpi=90)
+
+
+def time_history_figure(t_s, measured, predicted, inputs, names, units, input_names, *, title: str = "",
+                        tic=None) -> Figure:
+    """Verification plot: measured (solid) and model (dashed) outputs, and the inputs, against time.
+
+    Parameters
+    ----------
+    t_s : array, shape (N,)
+        Time [s].
+    measured, predicted : array, shape (n_outputs, N)
+        Flight data and model, in the outputs' units.
+    inputs : array, shape (n_inputs, N)
+    names, units : sequence of str
+        Output names and units.
+    input_names : sequence of str
+    title : str
+    tic : sequence of float, optional
+        Theil inequality coefficient per output, printed on its axis.
+    """
     n = len(names)
-    fig, axes = plt.subplots(n + 1, 1, figsize=(8.0, 1.7 * (n + 1) + 0.6), sharex=True)
+    fig = Figure(figsize=(8.0, 1.7 * (n + 1) + 0.6))
+    axes = fig.subplots(n + 1, 1, sharex=True)
     for k, ax in enumerate(axes[:-1]):
         ax.plot(t_s, measured[k], "k", lw=1.0, label="flight")
         ax.plot(t_s, predicted[k], "C3--", lw=1.2, label="model")
@@ -108,24 +134,32 @@ def time_history_plot(t_s, measured, predicted, inputs, names, units, input_name
     axes[-1].grid(True, lw=0.3)
     fig.suptitle(title)
     fig.subplots_adjust(left=0.12, right=0.98, top=0.93, bottom=0.08, hspace=0.1)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return fig
 
 
 def residual_plot(before, after, path, *, title: str = "") -> Path:
+    """Write :func:`residual_figure` as a PNG at ``path``; returns the path."""
+    return _save(residual_figure(before, after, title=title), path, dpi=80)
+
+
+def residual_figure(before, after, *, title: str = "") -> Figure:
     """Frequency-domain residual (data minus model) before and after one residual-loop step.
 
     Parameters
     ----------
     before, after : sequence of PairResidual
         Same pairs, same order (:func:`livesweep.ident.residual.pair_residuals`).
-    path : str or Path
-        PNG to write: one column per pair, magnitude [dB] over phase [deg], the data's
-        +/-2-sigma random error shaded.
+    title : str
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One column per pair, magnitude [dB] over phase [deg], the data's +/-2-sigma random
+        error shaded.
     """
     n = len(before)
-    fig, axes = plt.subplots(2, n, figsize=(max(2.6 * n, 6.0), 4.6), sharex="col", squeeze=False)
+    fig = Figure(figsize=(max(2.6 * n, 6.0), 4.6))
+    axes = fig.subplots(2, n, sharex="col", squeeze=False)
     for k, (b, a) in enumerate(zip(before, after)):
         for row, (yb, ya, sig, unit) in enumerate(((b.magnitude_db, a.magnitude_db, b.sigma_db, "dB"),
                                                   (b.phase_deg, a.phase_deg, b.sigma_deg, "deg"))):
@@ -146,8 +180,11 @@ def residual_plot(before, after, path, *, title: str = "") -> Path:
     if title:
         fig.suptitle(title, fontsize=10)
     fig.subplots_adjust(left=0.07, right=0.99, top=0.86, bottom=0.12, wspace=0.4, hspace=0.08)
+    return fig
+
+
+def _save(fig: Figure, path, *, dpi: int) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
+    fig.savefig(path, dpi=dpi)
     return path

@@ -15,7 +15,7 @@ from livesweep.ident.residual import effect_text
 from livesweep.numbers import finite_or_none
 from livesweep.report.plots import bode_plot
 
-__all__ = ["write_frequency_report", "prepare_out_dir", "save_response_set", "load_response_set",
+__all__ = ["write_report", "write_frequency_report", "prepare_out_dir", "save_response_set", "load_response_set",
            "RESPONSE_SET_FILE"]
 
 #: the stage's full frequency-response set (complex H, settings), for the parametric stages
@@ -82,8 +82,34 @@ def _atomic_write(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
+def write_report(identification, out_dir, *, plots: bool = True) -> Path:
+    """Write an :class:`~livesweep.pipeline.identify.Identification` to a folder; nothing in it changes.
+
+    Parameters
+    ----------
+    identification : Identification
+        What :func:`livesweep.identify` returned.
+    out_dir : str or Path
+        Folder for ``report.json``, ``report.html``, ``frequency_response_set.json``, ``plots/`` and
+        (when the residual loop added an effect) ``augmented_case.toml``; created if needed. Plots
+        of an earlier run that this one did not write are removed.
+    plots : bool
+        False skips every plot (about half the time of a report); ``report.json`` is the same and
+        its ``plot`` entries are null.
+
+    Returns
+    -------
+    Path
+        ``report.json``.
+    """
+    i = identification
+    return write_frequency_report(i.frequency_response, out_dir, transfer_functions=i.transfer_functions,
+                                  state_space=i.state_space, verification=i.verification, residual=i.residual,
+                                  plots=plots)
+
+
 def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_space=None, verification=None,
-                           residual=None) -> Path:
+                           residual=None, plots: bool = True) -> Path:
     """Write the report of the stages run; returns the path of ``report.json``.
 
     Parameters
@@ -103,7 +129,8 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
     case, an = stage.case, stage.analysis
     best = an.best
     units = {n: s.units for n, s in case.signals.items()}
-    responses, plots, taken = [], [], set()
+    responses, taken = [], set()
+    draw = plots
     tf_fits = list(transfer_functions.fits) if transfer_functions is not None else []
     ss_fit = state_space.fit if state_space is not None else None
     for pair in best.pairs():
@@ -119,57 +146,59 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
             T = ss_fit.frequency_response(pair.omega)[list(ssm.outputs).index(pair.output), list(ssm.inputs).index(pair.input)]
             j = next((c for o, i, c in ss_fit.cost_pairs if (o, i) == (pair.output, pair.input)), None)
             models.append(("state space" + (f" (J {j:.0f})" if j is not None else ""), pair.omega, T))
-        bode_plot(pair, out / rel, title=f"{case.name}: {pair.output} / {pair.input}",
-                  units=(units.get(pair.output, ""), units.get(pair.input, "")), ordinary=ordinary,
-                  models=models, fit_band_rad_s=band)
+        if draw:
+            bode_plot(pair, out / rel, title=f"{case.name}: {pair.output} / {pair.input}",
+                      units=(units.get(pair.output, ""), units.get(pair.input, "")), ordinary=ordinary,
+                      models=models, fit_band_rad_s=band)
         responses.append({**pair.to_dict(), "output_units": units.get(pair.output, ""),
-                          "input_units": units.get(pair.input, ""), "plot": rel})
-        plots.append(rel)
+                          "input_units": units.get(pair.input, ""), "plot": rel if draw else None})
     report = {
         "livesweep_version": __version__,
         "case": {"name": case.name, "aircraft": case.aircraft, "condition": case.condition, "path": str(case.path)},
         "stages": ["frequency-response"],
         "frequency_responses": responses,
         "spectral_settings": best.settings,
-        "data_quality": stage.data_quality,
+        "data_quality": {**stage.data_quality, "notes": list(stage.data_quality["notes"])},   # a copy: stages stay as computed
     }
     stages = report["stages"]
     if transfer_functions is not None:
         stages.append("transfer-functions")
         report["transfer_functions"] = [{**f.to_dict(), "handling_qualities": (transfer_functions.handling or {}).get(f.name)}
                                         for f in tf_fits]
-        report["data_quality"]["notes"] = list(report["data_quality"]["notes"]) + list(transfer_functions.notes)
+        report["data_quality"]["notes"] += list(transfer_functions.notes)
     if ss_fit is not None:
         stages.append("state-space")
         report["state_space"] = ss_fit.to_dict()
-        report["data_quality"]["notes"] = list(report["data_quality"]["notes"]) + list(state_space.notes)
+        report["data_quality"]["notes"] += list(state_space.notes)
     if verification is not None:
         stages.append("verification")
         from livesweep.report.plots import time_history_plot
 
         records = []
         for k, (label, v) in enumerate(verification.results):
-            rel = _plot_rel(f"verification_{k}", taken)
-            time_history_plot(v.t_s, v.measured, v.predicted, v.inputs, [o.name for o in v.outputs],
-                              [o.units for o in v.outputs], list(verification.inputs), out / rel,
-                              title=f"{case.name}: verification, {label}", tic=[o.tic for o in v.outputs])
+            rel = _plot_rel(f"verification_{k}", taken) if draw else None
+            if draw:
+                time_history_plot(v.t_s, v.measured, v.predicted, v.inputs, [o.name for o in v.outputs],
+                                  [o.units for o in v.outputs], list(verification.inputs), out / rel,
+                                  title=f"{case.name}: verification, {label}", tic=[o.tic for o in v.outputs])
             records.append({"label": label, **v.to_dict(), "plot": rel})
         first = records[0] if records else {}
         report["verification"] = {**{k: first.get(k) for k in ("outputs", "j_rms", "passed", "guidelines")},
                                   "records": records}
-        report["data_quality"]["notes"] = list(report["data_quality"]["notes"]) + list(verification.notes)
+        report["data_quality"]["notes"] += list(verification.notes)
     if residual is not None:
         stages.append("residual-loop")
-        report["residual_loop"] = _residual_section(case, residual.loop, out, taken)
+        report["residual_loop"] = _residual_section(case, residual.loop, out, taken, draw)
         from livesweep.report.plots import time_history_plot
 
         after = []
         for k, (label, v) in enumerate(residual.verification_after):
-            rel = _plot_rel(f"residual_verification_{k}", taken)
-            time_history_plot(v.t_s, v.measured, v.predicted, v.inputs, [o.name for o in v.outputs],
-                              [o.units for o in v.outputs], list(residual.loop.fit.model.inputs), out / rel,
-                              title=f"{case.name}: verification after the residual loop, {label}",
-                              tic=[o.tic for o in v.outputs])
+            rel = _plot_rel(f"residual_verification_{k}", taken) if draw else None
+            if draw:
+                time_history_plot(v.t_s, v.measured, v.predicted, v.inputs, [o.name for o in v.outputs],
+                                  [o.units for o in v.outputs], list(residual.loop.fit.model.inputs), out / rel,
+                                  title=f"{case.name}: verification after the residual loop, {label}",
+                                  tic=[o.tic for o in v.outputs])
             after.append({"label": label, "j_rms": finite_or_none(v.j_rms), "plot": rel,
                           "tic": {o.name: finite_or_none(o.tic) for o in v.outputs}})
         report["residual_loop"]["verification_final"] = after
@@ -181,22 +210,33 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
     report["frequency_response_set"] = RESPONSE_SET_FILE
     if best.conditioned:
         save_response_set(an.siso, out / ("ordinary_" + RESPONSE_SET_FILE))
+    _remove_stale_plots(out, taken if draw else set())
+    if residual is None or not residual.loop.added:
+        (out / "augmented_case.toml").unlink(missing_ok=True)          # an earlier run's, not this one's
     path = out / "report.json"
     _atomic_write(path, json.dumps(report, indent=1, allow_nan=False))
     _atomic_write(out / "report.html", _embed_images(_html(report), out))
     return path
 
 
-def _residual_section(case, loop, out: Path, taken: set[str]) -> dict:
+def _remove_stale_plots(out: Path, written: set[str]) -> None:
+    """Delete ``plots/*.png`` this report did not write (left by an earlier run into the same folder)."""
+    for f in (out / "plots").glob("*.png"):
+        if f.stem not in written:
+            f.unlink(missing_ok=True)
+
+
+def _residual_section(case, loop, out: Path, taken: set[str], draw: bool = True) -> dict:
     from livesweep.report.case_file import write_augmented_case
     from livesweep.report.plots import residual_plot
 
     d = loop.to_dict()
     for k, (step, sd) in enumerate(zip(loop.steps, d["steps"])):
-        rel = _plot_rel(f"residual_step_{k + 1}", taken)
+        rel = _plot_rel(f"residual_step_{k + 1}", taken) if draw else None
         what = (f"added {step.effect['kind']} at {step.effect['where']}" if step.effect else "nothing added")
-        residual_plot(step.residuals_before, step.residuals_after, out / rel,
-                      title=f"{case.name}: residual loop step {k + 1} ({what})")
+        if draw:
+            residual_plot(step.residuals_before, step.residuals_after, out / rel,
+                          title=f"{case.name}: residual loop step {k + 1} ({what})")
         sd["plot"] = rel
         sd["residuals_before"] = [r.to_dict() for r in step.residuals_before]
         sd["residuals_after"] = [r.to_dict() for r in step.residuals_after]
@@ -221,8 +261,8 @@ def _html(report: dict) -> str:
         f"<td>{c.get('rate_bias', '-')}</td><td>{'pass' if c.get('passed') else 'FAIL'}</td></tr>"
         for c in report["data_quality"]["kinematic_checks"])
     notes = "".join(f"<li>{e(n)}</li>" for n in report["data_quality"]["notes"]) or "<li>none</li>"
-    imgs = "".join(f'<figure><img src="{e(r["plot"])}" width="600"><figcaption>{e(r["output"])}/{e(r["input"])}'
-                   f'</figcaption></figure>' for r in report["frequency_responses"])
+    imgs = "".join(f'<figure>{_img(r["plot"], 600)}<figcaption>{e(r["output"])}/{e(r["input"])}'
+                   f'</figcaption></figure>' for r in report["frequency_responses"] if r["plot"])
     extra = _html_parametric(report)
     c = report["case"]
     return f"""<!doctype html><html><head><meta charset="utf-8"><title>livesweep: {e(c['name'])}</title>
@@ -233,6 +273,11 @@ td,th{{border:1px solid #ccc;padding:3px 8px}}figure{{display:inline-block;margi
 <th>median γ²</th></tr>{''.join(rows)}</table>
 <h2>Kinematic consistency</h2><table><tr><th>check</th><th>scale error</th><th>skew [s]</th><th>rate bias</th><th></th></tr>
 {checks}</table><h2>Notes</h2><ul>{notes}</ul>{extra}<h2>Frequency responses</h2>{imgs}</body></html>"""
+
+
+def _img(rel, width: int) -> str:
+    """An ``<img>`` of a plot written by this report; empty when plots were skipped."""
+    return f'<img src="{html.escape(rel)}" width="{width}">' if rel else ""
 
 
 def _embed_images(page: str, out: Path) -> str:
@@ -304,7 +349,7 @@ def _html_parametric(report: dict) -> str:
             tics = ", ".join(f"{o['name']} {o['tic']:.3f}" for o in r["outputs"])
             blocks.append(f"<p{_flag(bool(r.get('passed')))}>{e(r['label'])}: J<sub>rms</sub> {r['j_rms']:.3f}, "
                           f"TIC {e(tics)} &mdash; {'passes' if r.get('passed') else 'FAILS'} the guidelines</p>"
-                          f'<img src="{e(r["plot"])}" width="700">')
+                          + _img(r["plot"], 700))
         parts.append("<h2>Time-domain verification</h2><p>Dissimilar manoeuvres, no parameter changed; biases and "
                      "reference shifts by least squares (method.md §9). Guidelines: J<sub>rms</sub> &le; 2, TIC &le; 0.25."
                      "</p>" + "".join(blocks))
@@ -329,10 +374,10 @@ def _html_parametric(report: dict) -> str:
                             for t in st["tried"])
             blocks.append(f"<h3>Step {k + 1}: {head}</h3><p>J<sub>ave</sub> {st['cost_before']:.2f} &rarr; "
                           f"{st['cost_after']:.2f}{ver}. Ranked evidence (noise units): {e(cands)}</p>"
-                          f"<ul>{tried}</ul><img src=\"{e(st['plot'])}\" width=\"900\">")
+                          f"<ul>{tried}</ul>" + _img(st["plot"], 900))
         for r in rl.get("verification_final", []):
             blocks.append(f"<p>Time domain after the loop, {e(r['label'])}: J<sub>rms</sub> {r['j_rms']:.3f} "
-                          f"(before: see the verification section)</p><img src=\"{e(r['plot'])}\" width=\"700\">")
+                          f"(before: see the verification section)</p>" + _img(r["plot"], 700))
         if rl["unexplained"]:
             blocks.append("<p>Unexplained: " + e("; ".join(str(u) for u in rl["unexplained"])) + "</p>")
         crit = rl.get("criterion") or {}

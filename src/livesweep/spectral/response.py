@@ -22,6 +22,17 @@ from livesweep.numbers import frozen_array as _frozen
 __all__ = ["FrequencyResponse", "FrequencyResponseSet", "broken_loop"]
 
 
+def _readonly(a):
+    """``a`` as an array the holder cannot write through (a read-only view; no copy)."""
+    if a is None:
+        return None
+    arr = np.asarray(a)
+    if arr.flags.writeable:
+        arr = arr.view()
+        arr.setflags(write=False)
+    return arr
+
+
 def _mag_db(H):
     with np.errstate(divide="ignore"):
         return 20.0 * np.log10(np.abs(H))
@@ -67,6 +78,31 @@ class FrequencyResponse:
     coherence: np.ndarray
     random_error: np.ndarray
     conditioned: bool = False
+
+    def __post_init__(self):
+        for name in ("omega", "H", "coherence", "random_error"):
+            object.__setattr__(self, name, _readonly(getattr(self, name)))
+        n = self.omega.shape
+        for name in ("H", "coherence", "random_error"):
+            if getattr(self, name).shape != n:
+                raise ConfigError(f"FrequencyResponse {self.output}/{self.input}: {name} has shape "
+                                  f"{getattr(self, name).shape}, omega {n}")
+
+    def to_frd(self):
+        """This response as a SISO ``control.FrequencyResponseData`` (needs python-control).
+
+        See :func:`livesweep.interop.response_to_frd`.
+        """
+        from livesweep.interop import response_to_frd
+
+        return response_to_frd(self)
+
+    def to_arrays(self) -> dict:
+        """Plain, writable copies: ``omega`` [rad/s], ``H`` (complex), ``magnitude_db``,
+        ``phase_deg``, ``coherence``, ``random_error``."""
+        return {"omega": np.array(self.omega), "H": np.array(self.H), "magnitude_db": np.array(self.magnitude_db),
+                "phase_deg": np.array(self.phase_deg), "coherence": np.array(self.coherence),
+                "random_error": np.array(self.random_error)}
 
     @property
     def magnitude_db(self) -> np.ndarray:
@@ -166,6 +202,24 @@ class FrequencyResponseSet:
     multiple_coherence: np.ndarray | None = None
     ill_conditioned: np.ndarray | None = None
     settings: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        for name in ("omega", "H", "coherence", "random_error", "multiple_coherence", "ill_conditioned"):
+            object.__setattr__(self, name, _readonly(getattr(self, name)))
+        want = (len(self.outputs), len(self.inputs), self.omega.size)
+        for name in ("H", "coherence", "random_error"):
+            if getattr(self, name).shape != want:
+                raise ConfigError(f"FrequencyResponseSet: {name} has shape {getattr(self, name).shape}, "
+                                  f"expected (outputs, inputs, frequencies) = {want}")
+
+    def to_frd(self):
+        """The set as one MIMO ``control.FrequencyResponseData`` (needs python-control).
+
+        See :func:`livesweep.interop.response_set_to_frd`.
+        """
+        from livesweep.interop import response_set_to_frd
+
+        return response_set_to_frd(self)
 
     def pair(self, output: str, input: str) -> FrequencyResponse:
         """One pair; ConfigError naming the pair when it is not in the set."""

@@ -1,0 +1,153 @@
+"""``identify(case)``: the post-flight stages of one case, in order, as one frozen result.
+
+The command line (``livesweep identify``), ``livesweep batch`` and the demo only present what this
+returns; :func:`livesweep.report.writer.write_report` writes it to a folder.
+
+Examples
+--------
+>>> import livesweep
+>>> ident = livesweep.identify("config/xv15_cruise_lateral.toml", until="state-space")  # doctest: +SKIP
+>>> ident.state_space.fit.cost_average                                                  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from livesweep.config import Case, load_case
+from livesweep.errors import ConfigError
+from livesweep.pipeline import STAGES
+from livesweep.pipeline.frequency_response import FrequencyResponseStage, run_frequency_response_stage
+from livesweep.pipeline.parametric import (StateSpaceStage, TransferFunctionStage, VerificationStage,
+                                           run_state_space_stage, run_transfer_function_stage,
+                                           run_verification_stage)
+from livesweep.pipeline.residual import ResidualStage, residual_settings, run_residual_stage
+
+__all__ = ["STAGES", "Identification", "identify"]
+
+
+@dataclass(frozen=True)
+class Identification:
+    """Everything one ``identify`` computed for one case.
+
+    Attributes
+    ----------
+    case : Case
+        The parsed case file.
+    frequency_response : FrequencyResponseStage
+        Records, spectral analysis (``.analysis.best`` is the FrequencyResponseSet the fits use),
+        excitation adequacy and the data-quality record.
+    transfer_functions : TransferFunctionStage or None
+        None when the case has no ``[transfer_functions]`` or ``until`` stopped before it.
+    state_space : StateSpaceStage or None
+        The case's ``[state_space]`` model fitted, after structure reduction.
+    verification : VerificationStage or None
+        The fitted model driven open loop on each ``[[verify]]`` record.
+    residual : ResidualStage or None
+        The residual loop (what the model lacks, the effects added, the final fit).
+    stages : tuple of str
+        The stages that ran (names from :data:`STAGES`).
+    elapsed_s : float
+        Wall time of the stages [s].
+    """
+
+    case: Case
+    frequency_response: FrequencyResponseStage
+    transfer_functions: TransferFunctionStage | None
+    state_space: StateSpaceStage | None
+    verification: VerificationStage | None
+    residual: ResidualStage | None
+    stages: tuple
+    elapsed_s: float
+
+    @property
+    def responses(self):
+        """The frequency responses the fits use (FrequencyResponseSet: conditioned when MISO)."""
+        return self.frequency_response.analysis.best
+
+    @property
+    def data_quality(self) -> dict:
+        """Repairs, wild points, kinematic checks, excitation and notes of every stage (a new dict)."""
+        dq = dict(self.frequency_response.data_quality)
+        dq["notes"] = [*dq["notes"], *self.notes]
+        return dq
+
+    @property
+    def notes(self) -> tuple:
+        """Notes of the parametric stages (pairs not fitted, logs recovered, fits not converged)."""
+        return tuple(n for s in (self.transfer_functions, self.state_space, self.verification) if s is not None
+                     for n in s.notes)
+
+    @property
+    def model(self):
+        """The final state-space fit (StateSpaceFit): the residual loop's when it added effects,
+        else the state-space stage's; None without a state-space stage."""
+        if self.residual is not None and self.residual.loop.added:
+            return self.residual.loop.fit
+        return self.state_space.fit if self.state_space is not None else None
+
+
+def identify(case: Case | str | Path, *, until: str = "residual-loop",
+             progress: Callable[[str], None] | None = None) -> Identification:
+    """Run the identify stages of a case file and return what they computed.
+
+    Stages run in the order of :data:`STAGES` up to ``until``; each runs only when the case
+    defines it (``[transfer_functions]``, ``[state_space]``, ``[[verify]]``, ``[residual]``
+    enabled). Nothing is written to disk.
+
+    Parameters
+    ----------
+    case : Case, str or Path
+        A parsed case or the path of a case file (TOML).
+    until : str
+        The last stage to run, one of :data:`STAGES`.
+    progress : callable, optional
+        Called with one line of text as each stage starts.
+
+    Returns
+    -------
+    Identification
+
+    Raises
+    ------
+    ConfigError
+        A case file, table, key or log that cannot be used (one line naming it), before any
+        spectral work when it is in the model tables.
+    """
+    if until not in STAGES:
+        raise ConfigError(f"until = {until!r}: must be one of {', '.join(STAGES)}")
+    if not isinstance(case, Case):
+        case = load_case(case)
+    say = progress or (lambda msg: None)
+    if case.tables.get("state_space"):          # bad model tables fail before any work
+        from livesweep.ident.state_space import StateSpaceModel
+
+        StateSpaceModel.from_table(case.tables["state_space"], where=f"{case.path}: state_space")
+        residual_settings(case)
+    last = STAGES.index(until)
+    t0 = time.monotonic()
+    say(f"{case.name}: frequency responses from {len(case.identify)} record(s)")
+    fr = run_frequency_response_stage(case)
+    best = fr.analysis.best
+    ran = ["frequency-response"]
+    tf = ss = ver = res = None
+    if last >= 1 and case.tables.get("transfer_functions"):
+        say(f"transfer functions: {', '.join(case.tables['transfer_functions'])}")
+        tf = run_transfer_function_stage(case, best)
+        ran.append("transfer-functions")
+    if last >= 2 and case.tables.get("state_space"):
+        ss = run_state_space_stage(case, best, progress=say)
+        ran.append("state-space")
+    if last >= 3 and ss is not None and case.verify:
+        say(f"verification on {len(case.verify)} record(s)")
+        ver = run_verification_stage(case, ss, case.spectral.sample_rate_hz)
+        ran.append("verification")
+    if last >= 4 and ss is not None:
+        say("residual loop: diagnosing what the model lacks")
+        res = run_residual_stage(case, best, ss, runner=ver.runner if ver else None, progress=say)
+        if res is not None:
+            ran.append("residual-loop")
+    return Identification(case, fr, tf, ss, ver, res, tuple(ran), time.monotonic() - t0)
