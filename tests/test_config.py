@@ -150,10 +150,16 @@ def test_case_with_only_frequency_response_tables_and_integers_as_floats(case_di
     assert c.spectral.windows_s == (5.0, 10.5) and c.spectral.overlap == 0.0 and c.spectral.n_freq == 40
 
 
-def test_raw_tables_are_kept_unparsed(case_dir):
-    text = BASE + '\n[consistency]\nwhatever = 3\n[residual]\nmax_steps = "x"\n[verification]\na = [1, 2]\n'
+def test_stage_tables_are_kept_for_their_stage(case_dir):
+    text = BASE + '\n[residual]\nmax_steps = "x"\n'
     c = load_case(_write(case_dir, text))
-    assert c.tables == {"consistency": {"whatever": 3}, "verification": {"a": [1, 2]}, "residual": {"max_steps": "x"}}
+    assert c.tables == {"residual": {"max_steps": "x"}}      # the residual stage validates it
+
+
+@pytest.mark.parametrize("table", ["consistency", "verification"])
+def test_tables_nothing_reads_are_refused(case_dir, table):
+    with pytest.raises(ConfigError, match=rf"case\.toml: \[{table}\]: livesweep reads no \[{table}\] table .*remove it"):
+        load_case(_write(case_dir, BASE + f"\n[{table}]\nwhatever = 3\n"))
 
 
 BAD_CASES = [

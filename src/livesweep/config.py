@@ -15,8 +15,7 @@ stamp, selection) is checked against the MAVLink definition of ``MSG`` when the 
 Every problem raises :class:`~livesweep.errors.ConfigError` with a one-line message that names
 the file, the key path (``signals.p.scale``, ``identify[1].start_s``; array indices count from 0)
 and the offending value. Nothing is silently dropped: an unknown key in a table parsed here is an
-error. The tables of later stages (``consistency``, ``transfer_functions``, ``state_space``,
-``verification``, ``residual``) are kept raw in :attr:`Case.tables` and validated by the stages
+error. The tables of later stages (``transfer_functions``, ``state_space``, ``residual``) are kept raw in :attr:`Case.tables` and validated by the stages
 that use them.
 
 Units: times in seconds on the signals' stamp clock (vehicle time), frequencies in rad/s, sample
@@ -54,7 +53,12 @@ __all__ = [
 ]
 
 #: Top-level tables the stages after frequency-response estimation parse themselves.
-RAW_TABLE_KEYS = ("consistency", "transfer_functions", "state_space", "verification", "residual")
+RAW_TABLE_KEYS = ("transfer_functions", "state_space", "residual")
+#: Tables a case file once could hold but nothing reads: refused with what to do instead.
+_UNREAD_TABLES = {
+    "consistency": "the kinematic checks need no settings: they run on the [signals] named p/phi, q/theta, r/psi",
+    "verification": "time-domain verification runs on the [[verify]] records and has no settings",
+}
 #: Every top-level key a case file may hold.
 CASE_KEYS = ("case", "identify", "verify", "signals", "spectral") + RAW_TABLE_KEYS
 
@@ -313,6 +317,9 @@ def require_table(raw: Any, known, where: str) -> dict:
 def _check_keys(ctx: _Ctx, table: Mapping[str, Any], known: tuple[str, ...], where: str) -> None:
     """Raise on the first key of ``table`` not in ``known``."""
     for key in table:
+        if not where and key in _UNREAD_TABLES:
+            raise ConfigError(f"{ctx.path}: [{key}]: livesweep reads no [{key}] table ({_UNREAD_TABLES[key]}); "
+                              "remove it")
         if key not in known:
             path = f"{where}.{key}" if where else key
             raise ConfigError(

@@ -83,6 +83,7 @@ def bode_figure(response: FrequencyResponse, *, title: str = "", units: tuple[st
     a3.set_xlabel("frequency [rad/s]")
     for a in (a1, a2, a3):
         a.grid(True, which="major", lw=0.4)
+        a.xaxis.set_minor_locator(matplotlib.ticker.NullLocator())   # minor log ticks: a third of the drawing time
     a1.legend(fontsize=8, loc="lower left")          # "best" costs a search over every line
     a3.legend(fontsize=8, loc="lower left")
     fig.suptitle(title or f"{response.output} / {response.input}")
