@@ -257,3 +257,27 @@ def test_docstring_examples_run(module, monkeypatch):
     monkeypatch.chdir(ROOT)
     result = doctest.testmod(importlib.import_module(module), optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
     assert result.attempted > 0 and result.failed == 0
+
+
+# --- the examples run as a user runs them ------------------------------------------------------
+
+def test_example_identify_case_recovers_the_simulated_aileron_delay(tmp_path):
+    """The shipped cruise logs were simulated with a 0.0892 s aileron delay (replay_logs/regenerate.py)."""
+    out = subprocess.run([sys.executable, str(ROOT / "examples" / "identify_case.py"), "--out", str(tmp_path)],
+                         capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr[-2000:]
+    line = next(ln for ln in out.stdout.splitlines() if ln.strip().startswith("tau_a"))
+    value, cr_pct = float(line.split()[1]), float(line.split()[3])
+    assert abs(value - 0.0892) <= 3 * cr_pct / 100 * value
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["stages"][-1] == "residual-loop" and (tmp_path / "report.html").is_file()
+
+
+def test_example_replay_judges_the_aileron_sweep_go():
+    """A da sweep: p/da and phi/da coherent (the verdict GO names p/da as required); p/dr is not excited."""
+    out = subprocess.run([sys.executable, str(ROOT / "examples" / "replay_live.py")], capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    coh = {ln.split(":")[0].strip(): float(ln.split()[-1]) for ln in out.stdout.splitlines() if "median coherence" in ln}
+    assert coh["p/da"] > 0.9 and coh["phi/da"] > 0.9 and coh["p/dr"] < 0.5
+    assert out.stdout.strip().splitlines()[-1] == "verdict: GO"
