@@ -299,3 +299,18 @@ def test_channel_map_errors(tmp_path):
         load_channel_map(_write(tmp_path, good.replace('units = "deg"', "units = 3"), "map.toml"))
     with pytest.raises(ConfigError, match=r"signals: must define at least one signal"):
         load_channel_map(_write(tmp_path, "[signals]\n", "map.toml"))
+
+
+@pytest.mark.parametrize("band, message", [
+    ([0.0, 1.0], r"b = \[0.0, 1.0\]: the lower end must be > 0 rad/s"),
+    ([2.0, 1.0], r"the lower end must be below the upper end"),
+    ([1.0, float("nan")], r"b\[1\] = nan: must be a finite number"),
+    ("0.5, 2", r"must be \[low, high\], two numbers"),
+    ([1.0, 160.0], r"Nyquist frequency pi \* sample_rate_hz = 157.08 rad/s \(50 Hz\)"),
+])
+def test_one_band_check_for_every_band(band, message):
+    from livesweep.errors import check_band
+
+    with pytest.raises(ConfigError, match=message):
+        check_band(band, "b", sample_rate_hz=50.0)
+    assert check_band((0.5, 20), "b", sample_rate_hz=50.0) == (0.5, 20.0)

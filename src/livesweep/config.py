@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from livesweep import limits
-from livesweep.errors import ConfigError, quote
+from livesweep.errors import ConfigError, check_band, quote
 
 __all__ = [
     "SignalSpec",
@@ -514,19 +514,7 @@ def _parse_spectral(ctx: _Ctx, raw: Any, signals: Mapping[str, SignalSpec]) -> S
     if fs > limits.MAX_SAMPLE_RATE_HZ:
         raise ctx.error("spectral.sample_rate_hz", f"must be at most {limits.MAX_SAMPLE_RATE_HZ:g} Hz",
                         t["sample_rate_hz"])
-    band = t["band_rad_s"]
-    if not isinstance(band, list) or len(band) != 2:
-        raise ctx.error("spectral.band_rad_s", "must be an array [lo, hi] of two numbers in rad/s", band)
-    lo = _number(ctx, band[0], "spectral.band_rad_s[0]")
-    hi = _number(ctx, band[1], "spectral.band_rad_s[1]")
-    if lo <= 0:
-        raise ctx.error("spectral.band_rad_s", "lower bound must be > 0 rad/s", band)
-    if lo >= hi:
-        raise ctx.error("spectral.band_rad_s", "lower bound must be below the upper bound", band)
-    nyquist = math.pi * fs
-    if hi >= nyquist:
-        raise ctx.error("spectral.band_rad_s", f"upper bound must be below the Nyquist frequency "
-                        f"pi * sample_rate_hz = {nyquist:.6g} rad/s", band)
+    lo, hi = check_band(t["band_rad_s"], f"{ctx.path}: spectral.band_rad_s", sample_rate_hz=fs)
     windows: tuple[float, ...] | None = None
     if "windows_s" in t:
         w = t["windows_s"]

@@ -16,7 +16,7 @@ from scipy.optimize import minimize_scalar
 from scipy.signal import butter, detrend, sosfiltfilt
 
 from livesweep.consistency import usable_mask
-from livesweep.errors import ConfigError, require_number
+from livesweep.errors import ConfigError, check_band, require_number
 
 __all__ = ["euler_angle_rates", "KinematicCheck", "check_angle_against_rate"]
 
@@ -235,16 +235,7 @@ def check_angle_against_rate(
     fs = _finite_number("sample_rate_hz", sample_rate_hz, label)
     if fs <= 0:
         raise ConfigError(f"angle/rate check {label}: sample_rate_hz must be > 0, got {sample_rate_hz!r}")
-    try:
-        lo, hi = (float(v) for v in band_rad_s)
-    except (TypeError, ValueError):
-        raise ConfigError(f"angle/rate check {label}: band_rad_s must be two numbers, got {band_rad_s!r}") from None
-    nyq = math.pi * fs
-    if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi < nyq):
-        raise ConfigError(
-            f"angle/rate check {label}: band_rad_s must satisfy 0 < lo < hi < {nyq:.6g} rad/s "
-            f"(Nyquist at {fs:g} Hz), got {band_rad_s!r}"
-        )
+    lo, hi = check_band(band_rad_s, f"angle/rate check {label}: band_rad_s", sample_rate_hz=fs)
     tol_scale = _finite_number("tolerance_scale", tolerance_scale, label)
     tol_skew = _finite_number("tolerance_skew_s", tolerance_skew_s, label)
     max_skew = _finite_number("max_skew_s", max_skew_s, label)

@@ -32,7 +32,7 @@ import numpy as np
 import scipy.linalg
 from scipy.optimize import least_squares
 
-from livesweep.errors import ConfigError, quote
+from livesweep.errors import ConfigError, check_band, quote
 from livesweep.ident.accuracy import (MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT, accuracy_from_jacobian)
 from livesweep.ident.cost import MIN_COHERENCE, N_OMEGA, W_G, W_P, fit_points, residuals, select_band
 from livesweep.ident.expression import compile_entry
@@ -336,12 +336,7 @@ class StateSpaceModel:
             parts = key.split("/")
             if len(parts) != 2 or parts[0] not in outputs or parts[1] not in inputs:
                 raise ConfigError(f"{w}bands.{key!r}: must name a pair \"output/input\" of the model")
-            ok = (isinstance(val, (list, tuple)) and len(val) == 2
-                  and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in val)
-                  and 0 < val[0] < val[1] and math.isfinite(val[1]))
-            if not ok:
-                raise ConfigError(f"{w}bands.{key} = {val!r}: must be [lo, hi] rad/s with 0 < lo < hi")
-            bands[(parts[0], parts[1])] = (float(val[0]), float(val[1]))
+            bands[(parts[0], parts[1])] = check_band(val, f"{w}bands.{key}")
 
         used = set()
         for key in _MATRICES:

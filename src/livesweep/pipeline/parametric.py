@@ -6,13 +6,12 @@ Glue between the case file, the frequency-response stage's results and the pure 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from livesweep.config import Case, require_table
-from livesweep.errors import ConfigError, quote
+from livesweep.errors import ConfigError, check_band, quote
 from livesweep.ident.cost import fit_points
 from livesweep.ident.transfer_function import TransferFunctionModel, fit_transfer_function
 from livesweep.spectral.response import FrequencyResponseSet
@@ -70,12 +69,8 @@ def _tf_table(case: Case, name: str, raw) -> dict:
         raise ConfigError(f"{where}.numerator: must be a string (or an order), got {quote(numerator)}")
     if not isinstance(raw.get("delay", True), bool):
         raise ConfigError(f"{where}.delay: must be true or false, got {quote(raw['delay'])}")
-    band = raw.get("band_rad_s")
-    if band is not None and not (isinstance(band, list) and len(band) == 2
-                                 and all(isinstance(b, (int, float)) and not isinstance(b, bool) for b in band)
-                                 and 0 < band[0] < band[1] and math.isfinite(band[1])):
-        raise ConfigError(f"{where}.band_rad_s: must be [low, high] finite numbers with 0 < low < high [rad/s], "
-                          f"got {quote(band)}")
+    if raw.get("band_rad_s") is not None:
+        check_band(raw["band_rad_s"], f"{where}.band_rad_s")
     return raw
 
 
