@@ -281,3 +281,21 @@ def test_example_replay_judges_the_aileron_sweep_go():
     coh = {ln.split(":")[0].strip(): float(ln.split()[-1]) for ln in out.stdout.splitlines() if "median coherence" in ln}
     assert coh["p/da"] > 0.9 and coh["phi/da"] > 0.9 and coh["p/dr"] < 0.5
     assert out.stdout.strip().splitlines()[-1] == "verdict: GO"
+
+
+def test_stage_tables_are_parsed_once_and_fail_before_any_data_is_read(tmp_path):
+    from livesweep.ident.state_space import StateSpaceModel
+    from livesweep.pipeline.identify import parse_case_specs
+    from livesweep.config import load_case
+
+    case_path = ROOT / "config" / "xv15_cruise_lateral.toml"
+    specs = parse_case_specs(load_case(case_path))
+    assert isinstance(specs.state_space, StateSpaceModel) and specs.residual.enabled
+    assert [t.model.name for t in specs.transfer_functions] == ["p_da"]
+    bad = tmp_path / "bad.toml"
+    bad.write_text(case_path.read_text().replace("../replay_logs/", str(ROOT / "replay_logs") + "/")
+                   .replace("[transfer_functions.p_da]", "[transfer_functions.p_da]\ncolour = 'red'"))
+    said = []
+    with pytest.raises(ConfigError, match=r"bad\.toml: transfer_functions\.p_da.*colour"):
+        livesweep.identify(bad, progress=said.append)
+    assert said == []                                                   # nothing was read or computed

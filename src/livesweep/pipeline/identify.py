@@ -23,10 +23,38 @@ from livesweep.pipeline import STAGES
 from livesweep.pipeline.frequency_response import FrequencyResponseStage, run_frequency_response_stage
 from livesweep.pipeline.parametric import (StateSpaceStage, TransferFunctionStage, VerificationStage,
                                            run_state_space_stage, run_transfer_function_stage,
-                                           run_verification_stage)
-from livesweep.pipeline.residual import ResidualStage, residual_settings, run_residual_stage
+                                           run_verification_stage, transfer_function_specs)
+from livesweep.pipeline.residual import ResidualSettings, ResidualStage, residual_settings, run_residual_stage
 
-__all__ = ["STAGES", "Identification", "identify"]
+__all__ = ["STAGES", "CaseSpecs", "Identification", "identify", "parse_case_specs"]
+
+
+@dataclass(frozen=True)
+class CaseSpecs:
+    """The stage tables of a case, parsed once into typed specs.
+
+    Attributes
+    ----------
+    transfer_functions : tuple of TransferFunctionSpec
+        ``[transfer_functions.*]`` (empty when the case has none).
+    state_space : StateSpaceModel or None
+        ``[state_space]`` as a model (initial values, fixed parameters, delays, bands).
+    residual : ResidualSettings
+        ``[residual]`` with defaults filled in.
+    """
+
+    transfer_functions: tuple
+    state_space: object
+    residual: ResidualSettings
+
+
+def parse_case_specs(case: Case) -> CaseSpecs:
+    """Validate and parse every stage table of ``case`` (ConfigError naming file, table and key)."""
+    from livesweep.ident.state_space import StateSpaceModel
+
+    table = case.tables.get("state_space")
+    model = StateSpaceModel.from_table(table, where=f"{case.path}: state_space") if table else None
+    return CaseSpecs(transfer_function_specs(case), model, residual_settings(case))
 
 
 @dataclass(frozen=True)
@@ -48,6 +76,8 @@ class Identification:
         The fitted model driven open loop on each ``[[verify]]`` record.
     residual : ResidualStage or None
         The residual loop (what the model lacks, the effects added, the final fit).
+    specs : CaseSpecs
+        The case's stage tables as the stages used them.
     stages : tuple of str
         The stages that ran (names from :data:`STAGES`).
     elapsed_s : float
@@ -60,6 +90,7 @@ class Identification:
     state_space: StateSpaceStage | None
     verification: VerificationStage | None
     residual: ResidualStage | None
+    specs: CaseSpecs
     stages: tuple
     elapsed_s: float
 
@@ -122,11 +153,7 @@ def identify(case: Case | str | Path, *, until: str = "residual-loop",
     if not isinstance(case, Case):
         case = load_case(case)
     say = progress or (lambda msg: None)
-    if case.tables.get("state_space"):          # bad model tables fail before any work
-        from livesweep.ident.state_space import StateSpaceModel
-
-        StateSpaceModel.from_table(case.tables["state_space"], where=f"{case.path}: state_space")
-        residual_settings(case)
+    specs = parse_case_specs(case)              # bad stage tables fail before any work
     last = STAGES.index(until)
     t0 = time.monotonic()
     say(f"{case.name}: frequency responses from {len(case.identify)} record(s)")
@@ -134,12 +161,12 @@ def identify(case: Case | str | Path, *, until: str = "residual-loop",
     best = fr.analysis.best
     ran = ["frequency-response"]
     tf = ss = ver = res = None
-    if last >= 1 and case.tables.get("transfer_functions"):
-        say(f"transfer functions: {', '.join(case.tables['transfer_functions'])}")
-        tf = run_transfer_function_stage(case, best)
+    if last >= 1 and specs.transfer_functions:
+        say(f"transfer functions: {', '.join(t.model.name for t in specs.transfer_functions)}")
+        tf = run_transfer_function_stage(case, best, specs.transfer_functions)
         ran.append("transfer-functions")
-    if last >= 2 and case.tables.get("state_space"):
-        ss = run_state_space_stage(case, best, progress=say)
+    if last >= 2 and specs.state_space is not None:
+        ss = run_state_space_stage(case, best, progress=say, model=specs.state_space)
         ran.append("state-space")
     if last >= 3 and ss is not None and case.verify:
         say(f"verification on {len(case.verify)} record(s)")
@@ -147,7 +174,8 @@ def identify(case: Case | str | Path, *, until: str = "residual-loop",
         ran.append("verification")
     if last >= 4 and ss is not None:
         say("residual loop: diagnosing what the model lacks")
-        res = run_residual_stage(case, best, ss, runner=ver.runner if ver else None, progress=say)
+        res = run_residual_stage(case, best, ss, runner=ver.runner if ver else None, progress=say,
+                                 settings=specs.residual)
         if res is not None:
             ran.append("residual-loop")
-    return Identification(case, fr, tf, ss, ver, res, tuple(ran), time.monotonic() - t0)
+    return Identification(case, fr, tf, ss, ver, res, specs, tuple(ran), time.monotonic() - t0)

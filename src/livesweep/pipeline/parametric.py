@@ -16,7 +16,9 @@ from livesweep.ident.cost import fit_points
 from livesweep.ident.transfer_function import TransferFunctionModel, fit_transfer_function
 from livesweep.spectral.response import FrequencyResponseSet
 
-__all__ = ["TransferFunctionStage", "run_transfer_function_stage"]
+__all__ = ["TransferFunctionSpec", "TransferFunctionStage", "transfer_function_specs", "run_transfer_function_stage",
+           "StateSpaceStage", "run_state_space_stage", "VerificationStage", "VerificationRunner",
+           "run_verification_stage"]
 
 _TF_KEYS = {"output", "input", "numerator", "denominator", "delay", "band_rad_s"}
 
@@ -74,24 +76,59 @@ def _tf_table(case: Case, name: str, raw) -> dict:
     return raw
 
 
-def run_transfer_function_stage(case: Case, frs: FrequencyResponseSet) -> TransferFunctionStage | None:
+@dataclass(frozen=True)
+class TransferFunctionSpec:
+    """One ``[transfer_functions.<name>]`` table, parsed: the model and its fitting band.
+
+    Attributes
+    ----------
+    model : TransferFunctionModel
+        Name, numerator, denominator, delay, output and input.
+    band_rad_s : (float, float) or None
+        Fitting band [rad/s]; None: the pair's coherent band.
+    """
+
+    model: TransferFunctionModel
+    band_rad_s: tuple | None = None
+
+
+def transfer_function_specs(case: Case) -> tuple[TransferFunctionSpec, ...]:
+    """Every ``[transfer_functions.*]`` of the case, validated and parsed (ConfigError naming file
+    and key, before any data is read)."""
+    specs = []
+    for name, raw in (case.tables.get("transfer_functions") or {}).items():
+        t = _tf_table(case, name, raw)
+        where = f"{case.path}: transfer_functions.{name}"
+        try:
+            model = TransferFunctionModel(name=name, numerator=t.get("numerator", ""), denominator=t["denominator"],
+                                          delay=bool(t.get("delay", True)), output=t["output"], input=t["input"])
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+        band = check_band(t["band_rad_s"], f"{where}.band_rad_s") if t.get("band_rad_s") is not None else None
+        specs.append(TransferFunctionSpec(model, band))
+    return tuple(specs)
+
+
+def run_transfer_function_stage(case: Case, frs: FrequencyResponseSet,
+                                specs: tuple[TransferFunctionSpec, ...] | None = None) -> TransferFunctionStage | None:
     """Fit every ``[transfer_functions.*]`` of the case; models with the same denominator text
-    are fitted together with a shared denominator (the seed's Eq. 2.7). None when the case has none."""
-    tables = case.tables.get("transfer_functions") or {}
-    if not tables:
+    are fitted together with a shared denominator (the seed's Eq. 2.7). None when the case has none.
+
+    ``specs``: the case's parsed tables (:func:`transfer_function_specs`; parsed here when not given).
+    """
+    specs = transfer_function_specs(case) if specs is None else specs
+    if not specs:
         return None
     groups: dict[str, list] = {}
     pairs = {}
-    for name, raw in tables.items():
-        t = _tf_table(case, name, raw)
-        if t["output"] not in frs.outputs or t["input"] not in frs.inputs:
-            raise ConfigError(f"{case.path}: transfer_functions.{name}: pair {t['output']}/{t['input']} is not among "
-                              f"the frequency responses (outputs {list(frs.outputs)}, inputs {list(frs.inputs)})")
-        pd = fit_points(frs.pair(t["output"], t["input"]), band_rad_s=t.get("band_rad_s"))
-        model = TransferFunctionModel(name=name, numerator=t.get("numerator", ""), denominator=t["denominator"],
-                                      delay=bool(t.get("delay", True)), output=t["output"], input=t["input"])
-        groups.setdefault(" ".join(t["denominator"].split()), []).append((pd, model))
-        pairs[name] = pd
+    for spec in specs:
+        model = spec.model
+        if model.output not in frs.outputs or model.input not in frs.inputs:
+            raise ConfigError(f"{case.path}: transfer_functions.{model.name}: pair {model.output}/{model.input} is not "
+                              f"among the frequency responses (outputs {list(frs.outputs)}, inputs {list(frs.inputs)})")
+        pd = fit_points(frs.pair(model.output, model.input), band_rad_s=spec.band_rad_s)
+        groups.setdefault(str(model.denominator), []).append((pd, model))
+        pairs[model.name] = pd
     fits, notes = [], []
     for members in groups.values():
         result = fit_transfer_function([pd for pd, _ in members], [m for _, m in members])
@@ -119,10 +156,11 @@ class StateSpaceStage:
 
 
 def run_state_space_stage(case: Case, frs: FrequencyResponseSet, *, reduce: bool = True,
-                          progress=None) -> StateSpaceStage | None:
+                          progress=None, model=None) -> StateSpaceStage | None:
     """Fit the case's ``[state_space]`` model to the frequency responses, then reduce its structure.
 
-    None when the case has no ``[state_space]`` table.
+    None when the case has no ``[state_space]`` table. ``model``: the table already parsed
+    (:class:`~livesweep.ident.state_space.StateSpaceModel`; parsed here when not given).
     """
     from livesweep.ident.state_space import (StateSpaceModel, a_priori_eliminations, fit_state_space,
                                              reduce_structure, select_pairs)
@@ -130,7 +168,8 @@ def run_state_space_stage(case: Case, frs: FrequencyResponseSet, *, reduce: bool
     table = case.tables.get("state_space")
     if not table:
         return None
-    model = StateSpaceModel.from_table(table, where=f"{case.path}: state_space")
+    if model is None:
+        model = StateSpaceModel.from_table(table, where=f"{case.path}: state_space")
     pairs, skipped = select_pairs(frs, model)
     if not pairs:
         raise ConfigError(f"{case.path}: state_space: none of the model's pairs has usable coherence")

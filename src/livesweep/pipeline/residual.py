@@ -22,7 +22,7 @@ from livesweep.ident.residual import FALSE_ALARM, KINDS, ResidualLoop, run_resid
 from livesweep.pipeline.parametric import VerificationRunner
 from livesweep.spectral.response import FrequencyResponseSet
 
-__all__ = ["ResidualStage", "residual_settings", "run_residual_stage"]
+__all__ = ["ResidualSettings", "ResidualStage", "residual_settings", "run_residual_stage"]
 
 _KEYS = {"enabled", "max_steps", "kinds", "false_alarm", "min_evidence"}
 
@@ -37,7 +37,32 @@ class ResidualStage:
     verification_after: tuple = ()
 
 
-def residual_settings(case: Case) -> dict:
+@dataclass(frozen=True)
+class ResidualSettings:
+    """The case's ``[residual]`` table, validated, defaults filled in.
+
+    Attributes
+    ----------
+    enabled : bool
+    max_steps : int
+        Effects added at most (0-10).
+    kinds : tuple of str
+        Effect kinds searched (catalogue names).
+    false_alarm : float
+        Family-wise probability per step of adding an effect to a clean log, in (0, 0.2].
+    """
+
+    enabled: bool = True
+    max_steps: int = 3
+    kinds: tuple = tuple(KINDS)
+    false_alarm: float = FALSE_ALARM
+
+    def to_dict(self) -> dict:
+        return {"enabled": self.enabled, "max_steps": self.max_steps, "kinds": list(self.kinds),
+                "false_alarm": self.false_alarm}
+
+
+def residual_settings(case: Case) -> ResidualSettings:
     """Validated ``[residual]`` settings (defaults filled in); ConfigError naming file and key."""
     where = f"{case.path}: [residual]"
     raw = require_table(case.tables.get("residual") or {}, _KEYS, where)
@@ -59,20 +84,21 @@ def residual_settings(case: Case) -> dict:
     fa = raw.get("false_alarm", FALSE_ALARM)
     if isinstance(fa, bool) or not isinstance(fa, (int, float)) or not 0 < fa <= 0.2:
         raise ConfigError(f"{where}.false_alarm = {fa!r}: must be a probability in (0, 0.2]")
-    return {"enabled": enabled, "max_steps": steps, "kinds": list(kinds), "false_alarm": float(fa)}
+    return ResidualSettings(enabled, steps, tuple(kinds), float(fa))
 
 
 def run_residual_stage(case: Case, frs: FrequencyResponseSet, ss, *, runner=None,
-                       progress=None) -> ResidualStage | None:
+                       progress=None, settings: ResidualSettings | None = None) -> ResidualStage | None:
     """Run the loop on the state-space stage's result; None when there is nothing to run it on.
 
     ``runner``: the verification stage's :class:`~livesweep.pipeline.parametric.VerificationRunner`
     (its records are already loaded); built here when not given and the case has ``[[verify]]``.
+    ``settings``: the case's parsed ``[residual]`` (parsed here when not given).
     """
     if ss is None:
         return None
-    settings = residual_settings(case)
-    if not settings["enabled"]:
+    settings = settings or residual_settings(case)
+    if not settings.enabled:
         return None
     if runner is None and case.verify:
         model = ss.fit.model
@@ -82,7 +108,7 @@ def run_residual_stage(case: Case, frs: FrequencyResponseSet, ss, *, runner=None
         return [v for _, v in runner(model, theta)]
 
     loop = run_residual_loop(case.tables["state_space"], ss.fit, frs, verify=verify if runner else None,
-                             max_steps=settings["max_steps"], kinds=settings["kinds"],
-                             false_alarm=settings["false_alarm"], progress=progress)
+                             max_steps=settings.max_steps, kinds=list(settings.kinds),
+                             false_alarm=settings.false_alarm, progress=progress)
     after = tuple(runner(loop.fit.model, loop.fit.theta)) if runner is not None and loop.added else ()
     return ResidualStage(loop, settings, after)
