@@ -13,6 +13,8 @@ from livesweep import __version__
 from livesweep.errors import ConfigError
 from livesweep.ident.residual import effect_text
 from livesweep.numbers import finite_or_none
+from livesweep.report.export import (RESPONSES_CSV, RESPONSES_MAT, polynomials, state_space_export,
+                                     write_responses_csv, write_responses_mat)
 from livesweep.report.plots import bode_plot
 
 __all__ = ["write_report", "write_frequency_report", "prepare_out_dir", "save_response_set", "load_response_set",
@@ -163,12 +165,13 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
     stages = report["stages"]
     if transfer_functions is not None:
         stages.append("transfer-functions")
-        report["transfer_functions"] = [{**f.to_dict(), "handling_qualities": (transfer_functions.handling or {}).get(f.name)}
+        report["transfer_functions"] = [{**f.to_dict(), "polynomials": polynomials(f),
+                                         "handling_qualities": (transfer_functions.handling or {}).get(f.name)}
                                         for f in tf_fits]
         report["data_quality"]["notes"] += list(transfer_functions.notes)
     if ss_fit is not None:
         stages.append("state-space")
-        report["state_space"] = ss_fit.to_dict()
+        report["state_space"] = {**ss_fit.to_dict(), "matrices": state_space_export(ss_fit, units)}
         report["data_quality"]["notes"] += list(state_space.notes)
     if verification is not None:
         stages.append("verification")
@@ -189,6 +192,8 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
     if residual is not None:
         stages.append("residual-loop")
         report["residual_loop"] = _residual_section(case, residual.loop, out, taken, draw)
+        if residual.loop.added:      # the model with the effects the loop added
+            report["residual_loop"]["matrices"] = state_space_export(residual.loop.fit, units)
         from livesweep.report.plots import time_history_plot
 
         after = []
@@ -208,6 +213,10 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
         report["ill_conditioned"] = best.ill_conditioned.astype(bool).tolist()
     save_response_set(best, out / RESPONSE_SET_FILE)
     report["frequency_response_set"] = RESPONSE_SET_FILE
+    final = residual.loop.fit if residual is not None and residual.loop.added else ss_fit
+    write_responses_csv(best, out / RESPONSES_CSV, units)
+    write_responses_mat(best, out / RESPONSES_MAT, units, final)
+    report["exports"] = {"csv": RESPONSES_CSV, "mat": RESPONSES_MAT}
     if best.conditioned:
         save_response_set(an.siso, out / ("ordinary_" + RESPONSE_SET_FILE))
     _remove_stale_plots(out, taken if draw else set())
