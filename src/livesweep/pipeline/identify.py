@@ -152,7 +152,7 @@ def identify(case: Case | str | Path, *, until: str = "residual-loop",
         raise ConfigError(f"until = {until!r}: must be one of {', '.join(STAGES)}")
     if not isinstance(case, Case):
         case = load_case(case)
-    say = progress or (lambda msg: None)
+    say = progress if progress is not None else (lambda msg: None)
     specs = parse_case_specs(case)              # bad stage tables fail before any work
     last = STAGES.index(until)
     t0 = time.monotonic()
