@@ -208,6 +208,21 @@ def cmd_demo(args) -> int:
     return cmd_identify(argparse.Namespace(case=str(case), out=str(out_dir / "report"), stage="residual-loop"))
 
 
+def cmd_recover(args) -> int:
+    """``livesweep recover LOG``: a finished copy of an unfinished recording."""
+    from livesweep.telemetry.mcap_log import read_summary, recover
+
+    src = Path(args.log)
+    out = Path(args.out) if args.out else src.with_name(src.stem + ".recovered.mcap")
+    if out.exists() and not args.force:
+        raise ConfigError(f"--out {str(out)!r} exists; give --force to replace it")
+    before = read_summary(src)
+    n = recover(src, out)
+    state = "was finished (copied)" if before.complete else f"was unfinished ({before.tail_error or 'no footer'})"
+    print(f"recover: {src} {state}; {n} messages written to {out}, which any MCAP reader opens")
+    return 0
+
+
 def cmd_identify(args) -> int:
     """Identify from a case file: frequency responses, then (as the case defines them) transfer
     functions, state-space derivatives and time-domain verification."""
@@ -589,6 +604,14 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--partial", action="store_true",
                    help="convert a damaged DataFlash or ULog log even when less than half of it is readable")
     c.set_defaults(func=cmd_convert)
+
+    rc = sub.add_parser("recover", help="finish a recording whose process was killed, so any MCAP reader opens it",
+                        description="Copy every complete record of an unfinished MCAP recording (no footer: its "
+                                    "process was killed) into a finished file. Example: livesweep recover live.mcap")
+    rc.add_argument("log", help="the unfinished MCAP file")
+    rc.add_argument("--out", help="finished copy to write (default: LOG with .recovered.mcap)")
+    rc.add_argument("--force", action="store_true", help="replace an existing --out")
+    rc.set_defaults(func=cmd_recover)
 
     st = sub.add_parser("stream", help="send a recorded .tlog or DataFlash .bin over MAVLink as the vehicle sent it, "
                                        "paced by the log's own time")
