@@ -47,8 +47,7 @@ MAX_DELTA_COST = 2.0
 
 _MATRICES = ("M", "F", "G", "H", "J")
 _TABLE_KEYS = {"states", "inputs", "outputs", "M", "F", "G", "H", "J", "constants", "parameters", "delays", "output_delays",
-               "input_skews",
-               "bands"}
+               "input_skews", "bands", "units"}
 _DB = 20.0 / math.log(10.0)
 _DEG = 180.0 / math.pi
 
@@ -140,6 +139,9 @@ class StateSpaceModel:
         be negative).
     input_skew_entries : tuple of CompiledEntry
         One per input (the number 0 when not skewed).
+    state_units : dict of str -> str
+        Units of the states as the case's ``units`` table gives them (``v = "ft/s"``); the report
+        derives every derivative's units from them and the signals' units.
     bands : dict of (str, str) -> (float, float)
         Per-pair fitting bands [rad/s] from the case (``"p/da" = [lo, hi]``); others follow
         coherence.
@@ -172,6 +174,7 @@ class StateSpaceModel:
     output_delay_entries: tuple = ()
     input_skews: dict = field(default_factory=dict)
     input_skew_entries: tuple = ()
+    state_units: dict = field(default_factory=dict)
     _cache: dict = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self):
@@ -245,7 +248,7 @@ class StateSpaceModel:
         table : dict
             Keys ``states``, ``inputs``, ``outputs`` (lists of names); ``F``, ``G``, ``H`` and
             optionally ``M`` (default identity) and ``J`` (default zero): lists of rows of entry
-            strings; ``constants`` (name -> number); ``parameters`` (name -> ``{value, fixed}``
+            strings; ``units`` (state -> units text, optional); ``constants`` (name -> number); ``parameters`` (name -> ``{value, fixed}``
             or a bare number; a free parameter may omit ``value``, see :attr:`unset`); ``delays`` (input -> parameter or constant name, or a number
             [s]); ``bands`` (``"output/input"`` -> ``[lo, hi]`` rad/s, optional).
         where : str
@@ -349,9 +352,17 @@ class StateSpaceModel:
             if not fx and name not in used:
                 raise ConfigError(f"{w}parameters.{name}: free but used in no matrix entry or delay")
 
+        raw_u = table.get("units") or {}
+        if not isinstance(raw_u, dict):
+            raise ConfigError(f"{w}units = {quote(raw_u)}: must be a table of state = \"units\"")
+        for name, unit in raw_u.items():
+            if name not in states:
+                raise ConfigError(f"{w}units.{name}: not a state (states: {', '.join(states)})")
+            if not isinstance(unit, str):
+                raise ConfigError(f"{w}units.{name} = {quote(unit)}: must be a string such as \"rad/s\"")
         model = cls(states, inputs, outputs, mats["M"], mats["F"], mats["G"], mats["H"], mats["J"], constants,
                     tuple(names), _frozen(init), tuple(fixed), delays, tuple(dentries), bands, where, tuple(unset),
-                    odelays, tuple(odentries), iskews, tuple(isentries))
+                    odelays, tuple(odentries), iskews, tuple(isentries), dict(raw_u))
         model._check_at(model.initial, "the initial values")
         return model
 

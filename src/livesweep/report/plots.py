@@ -54,26 +54,45 @@ def bode_figure(response: FrequencyResponse, *, title: str = "", units: tuple[st
     w = response.omega
     eps = np.where(np.isfinite(response.random_error), response.random_error, np.nan)
     mag, ph = response.magnitude_db, response.phase_deg
+    coh = np.asarray(response.coherence, float)
+    good = np.isfinite(mag) & np.isfinite(ph) & (coh >= ADEQUATE_COHERENCE)
+    shown = good if good.any() else np.isfinite(mag) & np.isfinite(ph)
     fig = Figure(figsize=(7.5, 8.0))
     a1, a2, a3 = fig.subplots(3, 1, sharex=True, gridspec_kw={"height_ratios": [3, 3, 1.6]})
     label = "conditioned (MISO)" if response.conditioned else "composite"
-    a1.semilogx(w, mag, "C0", lw=1.6, label=label)
-    a1.fill_between(w, mag - 8.69 * eps, mag + 8.69 * eps, color="C0", alpha=0.15, lw=0, label="±1 random error")
-    a2.semilogx(w, ph, "C0", lw=1.6)
-    a2.fill_between(w, ph - np.rad2deg(eps), ph + np.rad2deg(eps), color="C0", alpha=0.15, lw=0)
+    # the whole estimate faint, the coherent points (gamma^2 >= 0.6) bold; limits follow those
+    a1.semilogx(w, mag, "C0", lw=0.8, alpha=0.35)
+    a2.semilogx(w, ph, "C0", lw=0.8, alpha=0.35)
+    a1.semilogx(w, np.where(good, mag, np.nan), "C0", lw=1.8, label=f"{label}, γ² ≥ {ADEQUATE_COHERENCE:g}")
+    a2.semilogx(w, np.where(good, ph, np.nan), "C0", lw=1.8)
+    band_db = np.where(good, 8.69 * eps, np.nan)
+    a1.fill_between(w, mag - band_db, mag + band_db, color="C0", alpha=0.15, lw=0, label="±1 random error")
+    band_deg = np.where(good, np.rad2deg(eps), np.nan)
+    a2.fill_between(w, ph - band_deg, ph + band_deg, color="C0", alpha=0.15, lw=0)
     if ordinary is not None:
-        a1.semilogx(w, ordinary.magnitude_db, "C1", lw=0.8, label="ordinary (SISO)")
-        a2.semilogx(w, ordinary.phase_deg, "C1", lw=0.8)
+        ph_o = np.asarray(ordinary.phase_deg, float)
+        both = shown & np.isfinite(ph_o)
+        if both.any():      # the same branch as the conditioned estimate: no 360 deg jump between them
+            ph_o = ph_o + 360.0 * np.round(np.median(ph[both] - ph_o[both]) / 360.0)
+        ok_o = np.asarray(ordinary.coherence, float) >= ADEQUATE_COHERENCE
+        a1.semilogx(w, np.where(ok_o, ordinary.magnitude_db, np.nan), "C1", lw=0.8, label="ordinary (SISO)")
+        a2.semilogx(w, np.where(ok_o, ph_o, np.nan), "C1", lw=0.8)
+    ref_w = w[shown][0] if shown.any() else w[0]
+    ref_ph = ph[shown][0] if shown.any() else 0.0
     for k, (label, wm, Hm) in enumerate(models or []):
         a1.semilogx(wm, 20 * np.log10(np.abs(Hm)), ls="--", color=f"C{3 + k}", lw=1.4, label=label)
         ph_m = np.rad2deg(np.unwrap(np.angle(Hm)))
-        ref = np.interp(wm[0], w, ph) if np.isfinite(ph).any() else 0.0
-        ph_m += 360.0 * np.round((ref - ph_m[0]) / 360.0)      # same branch as the data
+        at = np.interp(np.log(ref_w), np.log(wm), ph_m)
+        ph_m += 360.0 * np.round((ref_ph - at) / 360.0)      # same branch as the data
         a2.semilogx(wm, ph_m, ls="--", color=f"C{3 + k}", lw=1.4)
+    for a, y, pad in ((a1, mag, 3.0), (a2, ph, 15.0)):
+        if shown.any():
+            lo, hi = float(np.min(y[shown])), float(np.max(y[shown]))
+            a.set_ylim(lo - pad - 0.1 * (hi - lo), hi + pad + 0.1 * (hi - lo))
     if fit_band_rad_s is not None:
         for a in (a1, a2, a3):
             a.axvspan(*fit_band_rad_s, color="0.85", alpha=0.4, lw=0)
-    a3.semilogx(w, response.coherence, "C2", lw=1.4, label="partial coherence" if response.conditioned else "coherence")
+    a3.semilogx(w, coh, "C2", lw=1.4, label="partial coherence" if response.conditioned else "coherence")
     a3.axhline(ADEQUATE_COHERENCE, color="k", lw=0.7, ls="--")
     a3.set_ylim(0, 1.05)
     out_u, in_u = units
@@ -159,28 +178,34 @@ def residual_figure(before, after, *, title: str = "") -> Figure:
         error shaded.
     """
     n = len(before)
-    fig = Figure(figsize=(max(2.6 * n, 6.0), 4.6))
-    axes = fig.subplots(2, n, sharex="col", squeeze=False)
+    cols = min(n, 4)
+    blocks = -(-n // cols)                       # pairs in rows of four, magnitude over phase
+    fig = Figure(figsize=(3.2 * cols + 0.8, 4.4 * blocks + 0.6))
+    axes = fig.subplots(2 * blocks, cols, squeeze=False)
+    for k in range(n, blocks * cols):
+        axes[2 * (k // cols), k % cols].set_visible(False)
+        axes[2 * (k // cols) + 1, k % cols].set_visible(False)
     for k, (b, a) in enumerate(zip(before, after)):
+        r0, col = 2 * (k // cols), k % cols
         for row, (yb, ya, sig, unit) in enumerate(((b.magnitude_db, a.magnitude_db, b.sigma_db, "dB"),
                                                   (b.phase_deg, a.phase_deg, b.sigma_deg, "deg"))):
-            ax = axes[row, k]
-            ax.fill_between(b.omega, -2 * sig, 2 * sig, color="0.85", label="2 sigma")
-            ax.semilogx(b.omega, yb, color="tab:red", lw=1.2, label="before")
-            ax.semilogx(a.omega, ya, color="tab:blue", lw=1.2, label="after")
+            ax = axes[r0 + row, col]
+            ax.fill_between(b.omega, -2 * sig, 2 * sig, color="0.85", label="±2σ random error")
+            ax.semilogx(b.omega, yb, color="tab:red", lw=1.3, label="before")
+            ax.semilogx(a.omega, ya, color="tab:blue", lw=1.3, label="after")
             ax.axhline(0.0, color="k", lw=0.5)
             ax.grid(True, alpha=0.3)
             ax.xaxis.set_minor_locator(matplotlib.ticker.NullLocator())
-            if k == 0:
-                ax.set_ylabel(f"residual [{unit}]")
+            ax.set_ylabel(f"{b.output}/{b.input} [{unit}]", fontsize=9)
             if row == 0:
-                ax.set_title(f"{b.output}/{b.input}", fontsize=9)
+                ax.tick_params(labelbottom=False)
             else:
-                ax.set_xlabel("rad/s")
-    axes[0, 0].legend(fontsize=7, loc="upper right")
+                ax.set_xlabel("frequency [rad/s]", fontsize=8)
+    axes[0, 0].legend(fontsize=7, loc="best")
     if title:
-        fig.suptitle(title, fontsize=10)
-    fig.subplots_adjust(left=0.07, right=0.99, top=0.86, bottom=0.12, wspace=0.4, hspace=0.08)
+        fig.suptitle(title, fontsize=11)
+    fig.subplots_adjust(left=0.08, right=0.98, top=1 - 0.45 / fig.get_figheight(), bottom=0.5 / fig.get_figheight(),
+                        wspace=0.35, hspace=0.35)
     return fig
 
 

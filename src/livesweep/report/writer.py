@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime
 import html
 import json
 import os
@@ -11,11 +12,12 @@ from pathlib import Path
 
 from livesweep import __version__
 from livesweep.errors import ConfigError
-from livesweep.ident.residual import effect_text
 from livesweep.numbers import finite_or_none
 from livesweep.report.export import (RESPONSES_CSV, RESPONSES_MAT, polynomials, state_space_export,
                                      write_responses_csv, write_responses_mat)
+from livesweep.report.html import render as render_html
 from livesweep.report.plots import bode_plot
+from livesweep.report.units import parameter_units
 
 __all__ = ["write_report", "write_frequency_report", "prepare_out_dir", "save_response_set", "load_response_set",
            "RESPONSE_SET_FILE"]
@@ -81,6 +83,9 @@ def _atomic_write(path: Path, text: str) -> None:
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".partial")
     with os.fdopen(fd, "w") as f:
         f.write(text)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)       # mkstemp makes 0600; a report is for others to read too
     os.replace(tmp, path)
 
 
@@ -156,7 +161,9 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
                           "input_units": units.get(pair.input, ""), "plot": rel if draw else None})
     report = {
         "livesweep_version": __version__,
+        "generated_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC"),
         "case": {"name": case.name, "aircraft": case.aircraft, "condition": case.condition, "path": str(case.path)},
+        "inputs": _inputs(case, stage),
         "stages": ["frequency-response"],
         "frequency_responses": responses,
         "spectral_settings": best.settings,
@@ -171,7 +178,9 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
         report["data_quality"]["notes"] += list(transfer_functions.notes)
     if ss_fit is not None:
         stages.append("state-space")
-        report["state_space"] = {**ss_fit.to_dict(), "matrices": state_space_export(ss_fit, units)}
+        report["state_space"] = {**ss_fit.to_dict(), "matrices": state_space_export(ss_fit, units),
+                                 "parameter_units": parameter_units(case.tables["state_space"], units),
+                                 "state_units": dict(case.tables["state_space"].get("units") or {})}
         report["data_quality"]["notes"] += list(state_space.notes)
     if verification is not None:
         stages.append("verification")
@@ -194,6 +203,7 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
         report["residual_loop"] = _residual_section(case, residual.loop, out, taken, draw)
         if residual.loop.added:      # the model with the effects the loop added
             report["residual_loop"]["matrices"] = state_space_export(residual.loop.fit, units)
+            report["residual_loop"]["parameter_units"] = parameter_units(residual.loop.table, units)
         from livesweep.report.plots import time_history_plot
 
         after = []
@@ -224,8 +234,23 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
         (out / "augmented_case.toml").unlink(missing_ok=True)          # an earlier run's, not this one's
     path = out / "report.json"
     _atomic_write(path, json.dumps(report, indent=1, allow_nan=False))
-    _atomic_write(out / "report.html", _embed_images(_html(report), out))
+    _atomic_write(out / "report.html", _embed_images(render_html(report), out))
     return path
+
+
+def _inputs(case, stage) -> list[dict]:
+    """The logs the report rests on: role, label, file, SHA-256, size and the slice used."""
+    from livesweep.convert.common import sha256_of
+
+    rows = []
+    for role, records in (("identify", case.identify), ("verify", case.verify)):
+        for rec in records:
+            path = Path(rec.log)
+            ok = path.is_file()
+            rows.append({"role": role, "label": rec.label or path.name, "log": str(path), "name": path.name,
+                         "sha256": sha256_of(path) if ok else None, "bytes": path.stat().st_size if ok else None,
+                         "start_s": rec.start_s, "end_s": rec.end_s})
+    return rows
 
 
 def _remove_stale_plots(out: Path, written: set[str]) -> None:
@@ -258,37 +283,6 @@ def _residual_section(case, loop, out: Path, taken: set[str], draw: bool = True)
     return d
 
 
-def _html(report: dict) -> str:
-    e = html.escape
-    rows = []
-    for ex in report["data_quality"]["excitation"]:
-        band = ex["widest_band_rad_s"]
-        rows.append(f"<tr><td>{e(ex['output'])}/{e(ex['input'])}</td><td>{100 * ex['fraction_of_band']:.0f} %</td>"
-                    f"<td>{'%.2f - %.2f' % tuple(band) if band else '-'}</td><td>{ex['median_coherence']:.2f}</td></tr>")
-    checks = "".join(
-        f"<tr><td>{e(c.get('name', c['measured']))}</td><td>{c.get('scale_factor_error', '-')}</td><td>{c.get('skew_s', '-')}</td>"
-        f"<td>{c.get('rate_bias', '-')}</td><td>{'pass' if c.get('passed') else 'FAIL'}</td></tr>"
-        for c in report["data_quality"]["kinematic_checks"])
-    notes = "".join(f"<li>{e(n)}</li>" for n in report["data_quality"]["notes"]) or "<li>none</li>"
-    imgs = "".join(f'<figure>{_img(r["plot"], 600)}<figcaption>{e(r["output"])}/{e(r["input"])}'
-                   f'</figcaption></figure>' for r in report["frequency_responses"] if r["plot"])
-    extra = _html_parametric(report)
-    c = report["case"]
-    return f"""<!doctype html><html><head><meta charset="utf-8"><title>livesweep: {e(c['name'])}</title>
-<style>body{{font-family:sans-serif;max-width:1300px;margin:auto}}table{{border-collapse:collapse}}
-td,th{{border:1px solid #ccc;padding:3px 8px}}figure{{display:inline-block;margin:4px}}</style></head><body>
-<h1>{e(c['name'])}</h1><p>{e(c['aircraft'])} — {e(c['condition'])}; livesweep {e(report['livesweep_version'])}</p>
-<h2>Excitation adequacy (γ² ≥ 0.6, ε ≤ 0.2)</h2><table><tr><th>pair</th><th>of band</th><th>widest band [rad/s]</th>
-<th>median γ²</th></tr>{''.join(rows)}</table>
-<h2>Kinematic consistency</h2><table><tr><th>check</th><th>scale error</th><th>skew [s]</th><th>rate bias</th><th></th></tr>
-{checks}</table><h2>Notes</h2><ul>{notes}</ul>{extra}<h2>Frequency responses</h2>{imgs}</body></html>"""
-
-
-def _img(rel, width: int) -> str:
-    """An ``<img>`` of a plot written by this report; empty when plots were skipped."""
-    return f'<img src="{html.escape(rel)}" width="{width}">' if rel else ""
-
-
 def _embed_images(page: str, out: Path) -> str:
     """Make the page self-contained: every ``src="plots/..png"`` becomes a base64 data URI."""
     import base64
@@ -301,109 +295,3 @@ def _embed_images(page: str, out: Path) -> str:
         return 'src="data:image/png;base64,' + base64.b64encode(path.read_bytes()).decode() + '"'
 
     return re.sub(r'src="(plots/[^"]+\.png)"', data_uri, page)
-
-
-def _flag(ok: bool) -> str:
-    return "" if ok else ' style="background:#fdd"'
-
-
-def _html_parametric(report: dict) -> str:
-    """Transfer-function, derivative and verification tables, flagged against the guidelines."""
-    e = html.escape
-    parts = []
-    tfs = report.get("transfer_functions") or []
-    if tfs:
-        rows = "".join(
-            f"<tr><td>{e(t['name'])}</td><td>{e(t['output'])}/{e(t['input'])}</td><td>{t['gain']:.4g}</td>"
-            f"<td>{e('; '.join(_factor_text(f) for f in t.get('factors', [])))}</td><td>{1000 * t['delay_s']:.1f}</td>"
-            f"<td{_flag(t['cost'] <= 100)}>{t['cost']:.1f}</td>"
-            f"<td>{e(', '.join(f'{k} {v:.0f}%' for k, v in (t.get('cramer_rao_pct') or {}).items() if v is not None))}</td></tr>"
-            for t in tfs)
-        hq = []
-        for t in tfs:
-            h = t.get("handling_qualities") or {}
-            def fmt(d, k, scale=1.0, unit=""):
-                v = (d or {}).get(k)
-                return "-" if v is None else f"{scale * v:.3g}{unit}"
-            hq.append(f"<tr><td>{e(t['name'])}</td>" + "".join(
-                f"<td>{fmt(h.get(src), 'bandwidth_rad_s')}</td><td>{fmt(h.get(src), 'phase_delay_s', 1000)}</td>"
-                for src in ("measured", "fitted")) + "</tr>")
-        parts.append("<h3>Handling qualities (attitude response, method.md §10)</h3><table><tr><th>pair</th>"
-                     "<th>&omega;<sub>BW</sub> measured [rad/s]</th><th>&tau;<sub>p</sub> measured [ms]</th>"
-                     "<th>&omega;<sub>BW</sub> fitted</th><th>&tau;<sub>p</sub> fitted [ms]</th></tr>"
-                     + "".join(hq) + "</table>")
-        parts.append("<h2>Transfer functions</h2><p>J &le; 100 acceptable, &le; 50 excellent (method.md §7.2); "
-                     "Cram&eacute;r&ndash;Rao bounds in % of the value.</p><table><tr><th>name</th><th>pair</th>"
-                     f"<th>gain</th><th>factors</th><th>&tau; [ms]</th><th>J</th><th>CR %</th></tr>{rows}</table>")
-    ss = report.get("state_space")
-    if ss:
-        rows = "".join(
-            f"<tr><td>{e(p['name'])}</td><td>{p['value']:.5g}</td><td>{'fixed' if p['fixed'] else ''}</td>"
-            f"<td{_flag(p.get('cramer_rao_pct') is None or p['cramer_rao_pct'] <= 20)}>"
-            f"{'' if p.get('cramer_rao_pct') is None else '%.1f' % p['cramer_rao_pct']}</td>"
-            f"<td{_flag(p.get('insensitivity_pct') is None or p['insensitivity_pct'] <= 10)}>"
-            f"{'' if p.get('insensitivity_pct') is None else '%.1f' % p['insensitivity_pct']}</td></tr>"
-            for p in ss["parameters"])
-        cost = ss["cost"]
-        pairs = ", ".join(f"{c['output']}/{c['input']} {c['cost']:.0f}" for c in cost["pairs"])
-        parts.append(f"<h2>State-space derivatives</h2><p>J<sub>ave</sub> = {cost['average']:.1f} "
-                     f"(&le; 100 guideline); per pair: {e(pairs)}. Flagged: CR % &gt; 20, insensitivity % &gt; 10 "
-                     f"(method.md §8.4). Removed in structure reduction: {e(', '.join(ss.get('removed_parameters') or []) or 'none')}."
-                     "</p><table><tr><th>parameter</th><th>value</th><th></th><th>CR %</th><th>I %</th></tr>"
-                     f"{rows}</table>")
-    ver = report.get("verification")
-    if ver:
-        blocks = []
-        for r in ver["records"]:
-            tics = ", ".join(f"{o['name']} {o['tic']:.3f}" for o in r["outputs"])
-            blocks.append(f"<p{_flag(bool(r.get('passed')))}>{e(r['label'])}: J<sub>rms</sub> {r['j_rms']:.3f}, "
-                          f"TIC {e(tics)} &mdash; {'passes' if r.get('passed') else 'FAILS'} the guidelines</p>"
-                          + _img(r["plot"], 700))
-        parts.append("<h2>Time-domain verification</h2><p>Dissimilar manoeuvres, no parameter changed; biases and "
-                     "reference shifts by least squares (method.md §9). Guidelines: J<sub>rms</sub> &le; 2, TIC &le; 0.25."
-                     "</p>" + "".join(blocks))
-    rl = report.get("residual_loop")
-    if rl:
-        blocks = [f"<p><b>{e(rl['conclusion'])}</b> ({rl['re_identifications']} re-identifications)"
-                  + (f"; augmented case: <code>{e(rl['augmented_case'])}</code>" if rl.get("augmented_case") else "")
-                  + "</p>"]
-        for k, st in enumerate(rl["steps"]):
-            eff = st["effect"]
-            cands = ", ".join(f"{c['kind']} at {c['where']} ({c['evidence']:.0f})" for c in st["candidates"][:4])
-            vb, va = st.get("verification_before"), st.get("verification_after")
-            ver = (f"; verification J<sub>rms</sub> {vb['j_rms']:.3f} &rarr; {va['j_rms']:.3f}" if vb and va else "")
-            if eff:
-                pars = effect_text(eff).split(": ", 1)[1]
-                head = f"added <b>{e(eff['kind'])}</b> at <b>{e(eff['where'])}</b>: {e(pars)}"
-            else:
-                head = "nothing added"
-            tried = "".join(f"<li>{e(t['kind'])} at {e(t['where'])}"
-                            + "".join(f" with {e(w['kind'])} at {e(w['where'])}" for w in t.get("with", ()))
-                            + f": J<sub>ave</sub> {t['cost_after']:.2f}, {e(t['reason'])}</li>"
-                            for t in st["tried"])
-            blocks.append(f"<h3>Step {k + 1}: {head}</h3><p>J<sub>ave</sub> {st['cost_before']:.2f} &rarr; "
-                          f"{st['cost_after']:.2f}{ver}. Ranked evidence (noise units): {e(cands)}</p>"
-                          f"<ul>{tried}</ul>" + _img(st["plot"], 900))
-        for r in rl.get("verification_final", []):
-            blocks.append(f"<p>Time domain after the loop, {e(r['label'])}: J<sub>rms</sub> {r['j_rms']:.3f} "
-                          f"(before: see the verification section)</p>" + _img(r["plot"], 700))
-        if rl["unexplained"]:
-            blocks.append("<p>Unexplained: " + e("; ".join(str(u) for u in rl["unexplained"])) + "</p>")
-        crit = rl.get("criterion") or {}
-        test = (f" (an F-test counting its parameters and {crit['effective_points']:.0f} independent frequency "
-                f"values, false-alarm probability {crit['false_alarm']:g} per step)") if crit else ""
-        parts.append("<h2>Residual loop</h2><p>The identified model's residual against the data's random error, "
-                     "matched to a catalogue of missing effects; the best-supported one is added and kept only when "
-                     f"the drop of the residual is significant{e(test)}, J<sub>ave</sub> falls by 10 %, the "
-                     "verification error does not get worse beyond noise, and its parameters meet CR &le; 20 %, "
-                     "I &le; 10 % (one poorly determined shape parameter may be fixed at its fitted value).</p>"
-                     + "".join(blocks))
-    return "".join(parts)
-
-
-def _factor_text(f: dict) -> str:
-    if f.get("kind") == "second":
-        return f"[{f.get('zeta', float('nan')):.3g}, {f.get('omega', float('nan')):.3g}]"
-    if f.get("kind") == "first":
-        return f"(1/T = {f.get('inverse_time_constant', float('nan')):.3g})"
-    return str(f.get("kind", ""))

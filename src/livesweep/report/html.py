@@ -1,0 +1,380 @@
+"""``report.html``: the report of one identification as an engineering document.
+
+A first screen with the case, the date, the livesweep version, the input logs (SHA-256) and a
+summary of every stage with its flags against the method's guidelines
+(:func:`livesweep.report.summary.stage_summary`); then data quality, frequency responses,
+transfer functions, state-space derivatives with units, the mode table, time-domain
+verification, the residual loop, and a methods appendix so the document stands alone. Printable
+(a print stylesheet). Rendered from the ``report.json`` dictionary only.
+"""
+
+from __future__ import annotations
+
+import html
+import math
+
+from livesweep.report.summary import GUIDELINES, cr_text, modes, stage_summary
+
+__all__ = ["render"]
+
+_CSS = """
+body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;max-width:1200px;margin:0 auto;padding:0 16px;
+color:#1a1a1a;line-height:1.4}
+h1{margin-bottom:0}h2{border-bottom:2px solid #334;padding-bottom:2px;margin-top:32px}
+.sub{color:#555;margin-top:2px}
+table{border-collapse:collapse;margin:8px 0}td,th{border:1px solid #bbb;padding:3px 8px;vertical-align:top}
+th{background:#eef0f4;text-align:left}td.num{text-align:right;font-variant-numeric:tabular-nums}
+.pass{background:#e6f4ea}.flag{background:#fde2e1}.info{color:#555}
+.badge{display:inline-block;padding:1px 8px;border-radius:10px;font-weight:600;font-size:90%}
+.badge.pass{background:#2e7d32;color:#fff}.badge.flag{background:#c62828;color:#fff}
+code{background:#f3f3f3;padding:0 3px}figure{display:inline-block;margin:6px;vertical-align:top}
+figcaption{text-align:center;color:#444;font-size:90%}.hash{font-family:monospace;font-size:85%}
+.appendix p,.appendix li{max-width:900px}
+@media print{body{max-width:none;padding:0;font-size:10pt}h2{page-break-after:avoid}
+table,figure,img{page-break-inside:avoid}img{max-width:100%;height:auto}a{color:inherit;text-decoration:none}
+.noprint{display:none}}
+"""
+
+e = html.escape
+
+
+def _num(x, spec: str = ".4g", none: str = "—") -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return none
+    text = format(x, spec)
+    if text.lstrip("+-").strip("0.") == "" and text[0] in "+-":      # no "-0.000": a zero has no sign
+        text = text[1:]
+    return text
+
+
+def _img(rel, width: int, alt: str) -> str:
+    return f'<img src="{e(rel)}" width="{width}" alt="{e(alt)}">' if rel else ""
+
+
+def _slice(r: dict) -> str:
+    if r.get("start_s") is None and r.get("end_s") is None:
+        return "whole log"
+    return f"{_num(r.get('start_s'), '.1f', 'start')} to {_num(r.get('end_s'), '.1f', 'end')} s"
+
+
+def _first_screen(report: dict, summary: list[dict]) -> str:
+    c = report["case"]
+    sp = report.get("spectral_settings") or {}
+    logs = "".join(
+        f"<tr><td>{e(r['role'])}</td><td>{e(r['label'])}</td><td>{e(r['name'])}</td>"
+        f"<td class='hash' title='{e(r['sha256'] or '')}'>{e((r['sha256'] or 'missing')[:16])}</td>"
+        f"<td class='num'>{_num(r['bytes'] / 1e6 if r['bytes'] else None, '.2f')}</td>"
+        f"<td>{e(_slice(r))}</td></tr>"
+        for r in report.get("inputs") or [])
+    rows = []
+    for s in summary:
+        items = "".join(f"<li>{e(f)}</li>" for f in s["flags"]) + "".join(
+            f"<li class='info'>{e(i)}</li>" for i in s["info"])
+        rows.append(f"<tr class='{s['status']}'><td><b>{e(s['stage'])}</b></td>"
+                    f"<td><span class='badge {s['status']}'>{'PASS' if s['status'] == 'pass' else 'FLAG'}</span></td>"
+                    f"<td>{e(s['result'])}{'<ul>' + items + '</ul>' if items else ''}</td></tr>")
+    n_flag = sum(s["status"] == "flag" for s in summary)
+    verdict = ("every stage meets the guidelines" if not n_flag else
+               f"{n_flag} of {len(summary)} stages flagged: read the flags before using the model")
+    band = sp.get("band_rad_s") or []
+    settings = (f"band {band[0]:g}-{band[1]:g} rad/s, " if len(band) == 2 else "") + (
+        f"windows {', '.join(f'{w:g}' for w in sp.get('windows_s') or [])} s, {sp.get('sample_rate_hz', 0):g} Hz, "
+        f"overlap {100 * sp.get('overlap', 0):.0f} %")
+    return f"""<h1>{e(c['name'])}</h1>
+<p class="sub">{e(c['aircraft'])} — {e(c['condition'])}</p>
+<table><tr><th>case file</th><td><code>{e(c['path'])}</code></td></tr>
+<tr><th>generated</th><td>{e(report.get('generated_utc', ''))} by livesweep {e(report['livesweep_version'])}</td></tr>
+<tr><th>spectral settings</th><td>{e(settings)}</td></tr></table>
+<h2 id="summary">Summary: {e(verdict)}</h2>
+<table><tr><th>stage</th><th></th><th>result and flags (guidelines in <a href="#appendix">the appendix</a>)</th></tr>
+{''.join(rows)}</table>
+<h3>Input logs</h3><table><tr><th>role</th><th>label</th><th>file</th><th>SHA-256 (first 16)</th><th>MB</th>
+<th>time slice</th></tr>{logs}</table>"""
+
+
+def _data_quality(report: dict) -> str:
+    dq = report["data_quality"]
+    g = GUIDELINES
+    rows = []
+    for ex in dq["excitation"]:
+        band = ex["widest_band_rad_s"]
+        ok = ex["fraction_of_band"] >= g["coverage"]
+        rows.append(f"<tr class='{'pass' if ok else 'flag'}'><td>{e(ex['output'])}/{e(ex['input'])}</td>"
+                    f"<td class='num'>{100 * ex['fraction_of_band']:.0f} %</td>"
+                    f"<td>{'%.2f – %.2f' % tuple(band) if band else 'none'}</td>"
+                    f"<td class='num'>{_num(ex['median_coherence'], '.2f')}</td></tr>")
+    checks = []
+    for c in dq["kinematic_checks"]:
+        if "error" in c:
+            checks.append(f"<tr class='flag'><td>{e(c.get('measured', ''))}</td><td colspan='4'>not run: "
+                          f"{e(c['error'])}</td></tr>")
+            continue
+        checks.append(f"<tr class='{'pass' if c.get('passed') else 'flag'}'><td>{e(c['name'])}</td>"
+                      f"<td class='num'>{_num(c.get('scale_factor_error'), '+.3f')}</td>"
+                      f"<td class='num'>{_num(1000 * c['skew_s'] if c.get('skew_s') is not None else None, '+.0f')}</td>"
+                      f"<td class='num'>{_num(c.get('rate_bias'), '+.3f')} {e(c.get('rate_bias_units', ''))}</td>"
+                      f"<td>{'pass' if c.get('passed') else 'FAIL'}</td></tr>")
+    repairs = []
+    for name, r in (dq.get("repairs") or {}).items():
+        done = {k: v for k, v in r.items() if v}
+        if done:
+            repairs.append(f"<li>{e(name)}: " + e(", ".join(f"{k.replace('_', ' ')} {v}" for k, v in done.items()))
+                           + "</li>")
+    for name, w in (dq.get("wild_points") or {}).items():
+        if w.get("replaced"):
+            repairs.append(f"<li>{e(name)}: {w['replaced']} wild point(s) replaced ({e(w.get('method', ''))})</li>")
+    notes = "".join(f"<li>{e(n)}</li>" for n in dq.get("notes") or [])
+    return (f"<h2 id='data'>Data quality</h2><p>{_num(dq.get('duration_s'), '.0f')} s of data at "
+            f"{_num(dq.get('sample_rate_hz'), 'g')} Hz. A frequency point is adequate when γ² ≥ {g['coherence']} and "
+            f"ε<sub>r</sub> ≤ {g['random_error']}; a pair is flagged below {100 * g['coverage']:.0f} % of the band.</p>"
+            "<table><tr><th>pair</th><th>adequate</th><th>widest adequate band [rad/s]</th><th>median γ²</th></tr>"
+            + "".join(rows) + "</table>"
+            + ("<h3>Kinematic consistency</h3><table><tr><th>check</th><th>scale error</th><th>skew [ms]</th>"
+               "<th>rate bias</th><th></th></tr>" + "".join(checks) + "</table>" if checks else "")
+            + f"<h3>Repairs</h3><ul>{''.join(repairs) or '<li>none</li>'}</ul>"
+            + (f"<h3>Notes</h3><ul>{notes}</ul>" if notes else ""))
+
+
+def _responses(report: dict) -> str:
+    figs = "".join(f"<figure>{_img(r['plot'], 560, r['output'] + '/' + r['input'])}<figcaption>{e(r['output'])}/"
+                   f"{e(r['input'])} [{e(r.get('output_units', ''))}/{e(r.get('input_units', ''))}]</figcaption></figure>"
+                   for r in report["frequency_responses"] if r.get("plot"))
+    cond = any(r.get("conditioned") for r in report["frequency_responses"])
+    return ("<h2 id='responses'>Frequency responses</h2><p>Composite of the windows in the summary"
+            + ("; conditioned on the other inputs (MISO): partial coherence, the ordinary (SISO) estimate thin" if cond
+               else "") + f". Points with γ² below {GUIDELINES['coherence']} are drawn faint and left out of the axis "
+            "limits; the band shows ±1 random error. Data: <code>frequency_response_set.json</code>, "
+            "<code>frequency_responses.csv</code>, <code>frequency_responses.mat</code>.</p>"
+            + (figs or "<p>Plots were not written (<code>--no-plots</code>).</p>"))
+
+
+def _factor_text(f: dict) -> str:
+    if f.get("kind") == "second":
+        return f"[ζ {_num(f.get('zeta'), '.3g')}, ω {_num(f.get('omega'), '.3g')} rad/s]"
+    if f.get("kind") == "first":
+        return f"(1/T {_num(f.get('inverse_time_constant'), '.3g')} rad/s)"
+    if f.get("kind") == "s":
+        return f"s^{f.get('power', 1)}" if f.get("power", 1) != 1 else "s"
+    return str(f.get("kind", ""))
+
+
+def _transfer_functions(report: dict) -> str:
+    tfs = report.get("transfer_functions") or []
+    if not tfs:
+        return ""
+    g = GUIDELINES
+    rows = []
+    for t in tfs:
+        num = [_factor_text(f) for f in t.get("factors", []) if f.get("where") == "numerator"]
+        den = [_factor_text(f) for f in t.get("factors", []) if f.get("where") == "denominator"]
+        crs = ", ".join(f"{k} {cr_text(v)}" for k, v in (t.get("cramer_rao_pct") or {}).items())
+        bad_cr = any(v is None or v > g["cramer_rao_pct"] for v in (t.get("cramer_rao_pct") or {}).values())
+        band = t.get("band_rad_s") or []
+        rows.append(f"<tr><td>{e(t['name'])}</td><td>{e(t['output'])}/{e(t['input'])}</td>"
+                    f"<td class='num'>{_num(t['gain'])}</td><td>{e(' '.join(num) or '1')}</td><td>{e(' '.join(den) or '1')}"
+                    f"</td><td class='num'>{_num(1000 * t['delay_s'] if t.get('delay_s') is not None else None, '.1f')}</td>"
+                    f"<td>{'%.2f – %.2f' % tuple(band) if len(band) == 2 else ''}</td>"
+                    f"<td class='num {'flag' if t['cost'] > g['cost_tf'] else ''}'>{t['cost']:.1f}</td>"
+                    f"<td class='{'flag' if bad_cr else ''}'>{e(crs)}</td></tr>")
+    hq = []
+    for t in tfs:
+        h = t.get("handling_qualities") or {}
+        m, f = h.get("measured") or {}, h.get("fitted") or {}
+        if not m and not f:
+            continue
+        hq.append(f"<tr><td>{e(t['name'])}</td><td>{e(m.get('response') or f.get('response') or '')}</td>"
+                  f"<td class='num'>{_num(m.get('bandwidth_rad_s'), '.3g')}</td>"
+                  f"<td class='num'>{_num(1000 * m['phase_delay_s'] if m.get('phase_delay_s') is not None else None, '.0f')}</td>"
+                  f"<td class='num'>{_num(f.get('bandwidth_rad_s'), '.3g')}</td>"
+                  f"<td class='num'>{_num(1000 * f['phase_delay_s'] if f.get('phase_delay_s') is not None else None, '.0f')}</td></tr>")
+    return ("<h2 id='tf'>Transfer functions</h2><p>T(s) = K · numerator / denominator · e<sup>−τs</sup>; "
+            "first-order factors (s + 1/T), second-order [ζ, ω] = s² + 2ζωs + ω². Guidelines: J ≤ 100 "
+            "(≤ 50 excellent), Cramér–Rao bounds ≤ 20 % of the value (<a href='#appendix'>appendix</a>). "
+            "Polynomials: <code>report.json</code>.</p>"
+            "<table><tr><th>name</th><th>pair</th><th>K</th><th>numerator</th><th>denominator</th><th>τ [ms]</th>"
+            "<th>band [rad/s]</th><th>J</th><th>CR [%]</th></tr>" + "".join(rows) + "</table>"
+            + ("<h3>Handling-qualities parameters</h3><table><tr><th>name</th><th>response</th>"
+               "<th>ω<sub>BW</sub> measured [rad/s]</th><th>τ<sub>p</sub> measured [ms]</th><th>ω<sub>BW</sub> fitted</th>"
+               "<th>τ<sub>p</sub> fitted [ms]</th></tr>" + "".join(hq) + "</table>" if hq else ""))
+
+
+def _parameter_table(params, units, removed=()) -> str:
+    g = GUIDELINES
+    rows = []
+    for p in params:
+        cr, ins = p.get("cramer_rao_pct"), p.get("insensitivity_pct")
+        status = ("fixed (removed in structure reduction)" if p["name"] in removed else
+                  "fixed" if p["fixed"] else "")
+        bad_cr = not p["fixed"] and (cr is None or cr > g["cramer_rao_pct"])
+        bad_i = not p["fixed"] and ins is not None and ins > g["insensitivity_pct"]
+        unit = units.get(p["name"])
+        rows.append(f"<tr><td>{e(p['name'])}</td><td class='num'>{_num(p['value'], '.5g')}</td>"
+                    f"<td>{e(unit) if unit else '<i>see the model</i>'}</td><td>{e(status)}</td>"
+                    f"<td class='num {'flag' if bad_cr else ''}'>{'' if p['fixed'] else e(cr_text(cr))}</td>"
+                    f"<td class='num {'flag' if bad_i else ''}'>{'' if p['fixed'] else _num(ins, '.1f')}</td></tr>")
+    return ("<table><tr><th>parameter</th><th>value</th><th>units</th><th></th><th>CR [%]</th><th>I [%]</th></tr>"
+            + "".join(rows) + "</table>")
+
+
+def _mode_table(eigenvalues) -> str:
+    rows = []
+    for m in modes(eigenvalues):
+        re_, im = m["eigenvalue"]
+        lam = f"{re_:.4g} ± {im:.4g}j" if m["kind"] == "oscillatory" else f"{re_:.4g}"
+        if m["kind"] == "oscillatory":
+            what = (f"<td class='num'>{m['omega_n_rad_s']:.4g}</td><td class='num'>{m['zeta']:.3f}</td>"
+                    f"<td class='num'>{m['period_s']:.3g}</td><td></td>")
+        else:
+            tc = m.get("time_constant_s")
+            td = m.get("time_to_double_s")
+            what = ("<td></td><td></td><td></td>"
+                    f"<td class='num'>{_num(tc, '.3g') if tc is not None else ('doubles in ' + _num(td, '.3g') if td else '')}</td>")
+        rows.append(f"<tr class='{'' if m['stable'] else 'flag'}'><td>{e(m['kind'])}</td><td class='num'>{e(lam)}</td>"
+                    f"{what}<td>{'stable' if m['stable'] else 'unstable'}</td></tr>")
+    return ("<table><tr><th>mode</th><th>eigenvalue [1/s]</th><th>ω<sub>n</sub> [rad/s]</th><th>ζ</th><th>period [s]</th>"
+            "<th>time constant [s]</th><th></th></tr>" + "".join(rows) + "</table>")
+
+
+def _state_space(report: dict) -> str:
+    ss = report.get("state_space")
+    if not ss:
+        return ""
+    cost = ss["cost"]
+    pairs = ", ".join(f"{c['output']}/{c['input']} {_num(c['cost'], '.0f')}" for c in cost["pairs"])
+    su = ss.get("state_units") or {}
+    m = ss.get("matrices") or {}
+    states = ", ".join(f"{s} [{su.get(s, '?')}]" for s in m.get("states", []))
+    ins = ", ".join(f"{n} [{u}]" for n, u in zip(m.get("inputs", []), m.get("input_units", [])))
+    outs = ", ".join(f"{n} [{u}]" for n, u in zip(m.get("outputs", []), m.get("output_units", [])))
+    missing = "" if su else (" <b>The case gives no units for the states</b> (<code>[state_space.units]</code>), so "
+                             "derivatives are shown without units.")
+    return (f"<h2 id='ss'>State-space model</h2><p>States {e(states)}; inputs {e(ins)}; outputs {e(outs)}.{missing} "
+            f"J<sub>ave</sub> = {_num(cost['average'], '.2f')} (guideline ≤ {GUIDELINES['cost_ss']:.0f}); per pair: "
+            f"{e(pairs)}. A derivative's units are those of its state's rate per unit of the state or input it "
+            "multiplies. Flagged: CR &gt; 20 %, insensitivity &gt; 10 %. Matrices A, B, C, D: <code>report.json</code> "
+            "and <code>frequency_responses.mat</code>.</p>"
+            + _parameter_table(ss["parameters"], ss.get("parameter_units") or {}, ss.get("removed_parameters") or ())
+            + "<h3>Modes</h3>" + _mode_table(ss.get("eigenvalues") or []))
+
+
+def _verification(report: dict) -> str:
+    ver = report.get("verification")
+    if not ver:
+        return ""
+    g = GUIDELINES
+    blocks = []
+    for r in ver["records"]:
+        ok = r.get("passed")
+        tics = "".join(f"<td class='num {'' if o['tic'] is not None and o['tic'] <= g['tic'] else 'flag'}'>"
+                       f"{_num(o['tic'], '.3f')}</td>" for o in r["outputs"])
+        head = "".join(f"<th>TIC {e(o['name'])}</th>" for o in r["outputs"])
+        blocks.append(f"<h3>{e(r['label'])}: {'passes' if ok else 'FAILS'} the guidelines</h3>"
+                      f"<table><tr><th>J<sub>rms</sub></th>{head}</tr><tr><td class='num "
+                      f"{'' if r['j_rms'] is not None and r['j_rms'] <= g['j_rms'] else 'flag'}'>{_num(r['j_rms'], '.3f')}"
+                      f"</td>{tics}</tr></table>" + _img(r.get("plot"), 760, "verification " + r["label"]))
+    return ("<h2 id='verification'>Time-domain verification</h2><p>The identified model, no parameter changed, "
+            "driven with the measured inputs of dissimilar manoeuvres; biases and reference shifts by least squares. "
+            f"Guidelines: J<sub>rms</sub> ≤ {g['j_rms']:g}, TIC ≤ {g['tic']:g}.</p>" + "".join(blocks))
+
+
+def _residual(report: dict) -> str:
+    rl = report.get("residual_loop")
+    if not rl:
+        return ""
+    from livesweep.ident.residual import effect_text
+
+    blocks = [f"<p><b>{e(rl['conclusion'])}</b> ({rl['re_identifications']} re-identifications)"
+              + (f"; augmented case: <code>{e(rl['augmented_case'])}</code>" if rl.get("augmented_case") else "")
+              + "</p>"]
+    for k, st in enumerate(rl["steps"]):
+        eff = st["effect"]
+        cands = ", ".join(f"{c['kind']} at {c['where']} ({c['evidence']:.0f})" for c in st["candidates"][:4])
+        vb, va = st.get("verification_before"), st.get("verification_after")
+        ver = (f"; verification J<sub>rms</sub> {vb['j_rms']:.3f} → {va['j_rms']:.3f}" if vb and va else "")
+        head = (f"added <b>{e(eff['kind'])}</b> at <b>{e(eff['where'])}</b>: {e(effect_text(eff).split(': ', 1)[1])}"
+                if eff else "nothing added")
+        tried = "".join(f"<li>{e(t['kind'])} at {e(t['where'])}"
+                        + "".join(f" with {e(w['kind'])} at {e(w['where'])}" for w in t.get("with", ()))
+                        + f": J<sub>ave</sub> {_num(t.get('cost_after'), '.2f')}; {e(t['reason'])}</li>"
+                        for t in st["tried"])
+        blocks.append(f"<h3>Step {k + 1}: {head}</h3><p>J<sub>ave</sub> {st['cost_before']:.2f} → "
+                      f"{st['cost_after']:.2f}{ver}. Strongest candidates (evidence, noise units): {e(cands)}</p>"
+                      + (f"<ul>{tried}</ul>" if tried else "") + _img(st.get("plot"), 1100, f"residual step {k + 1}"))
+    if rl.get("parameter_units") and rl.get("augmented_case"):
+        final = {p["name"]: p for e_ in (st["effect"] for st in rl["steps"] if st["effect"])
+                 for p in [*e_["parameters"], *(q for w in e_.get("with", ()) for q in w["parameters"])]}
+        if final:
+            blocks.append("<h3>Parameters of the added effects</h3>" + _parameter_table(
+                [{"name": n, "value": p["value"], "fixed": bool(p.get("fixed")), "cramer_rao_pct": p.get("cramer_rao_pct"),
+                  "insensitivity_pct": p.get("insensitivity_pct")} for n, p in final.items()], rl["parameter_units"]))
+    for r in rl.get("verification_final", []):
+        blocks.append(f"<p>Time domain after the loop, {e(r['label'])}: J<sub>rms</sub> {_num(r['j_rms'], '.3f')}</p>"
+                      + _img(r.get("plot"), 760, "verification after the loop"))
+    unexplained = [u for u in rl.get("unexplained") or [] if "pair" in u]
+    if unexplained:
+        blocks.append("<p>Still above noise after the loop: " + e(", ".join(
+            f"{u['pair']} ({u['rms_noise_units']} noise units rms)" for u in unexplained)) + "</p>")
+    crit = rl.get("criterion") or {}
+    test = (f" (an F-test counting its parameters and {crit['effective_points']:.0f} independent frequency values, "
+            f"false-alarm probability {crit['false_alarm']:g} per step)") if crit else ""
+    return ("<h2 id='residual'>Residual loop</h2><p>The model's residual against the data's random error, matched to a "
+            "catalogue of effects the model may lack; the best-supported one is added and kept only when the drop of "
+            f"the residual is significant{e(test)}, J<sub>ave</sub> falls by 10 %, the verification error does not get "
+            "worse beyond noise, and its parameters meet the CR and insensitivity guidelines (one poorly determined "
+            "shape parameter may be fixed at its fitted value).</p>" + "".join(blocks))
+
+
+_APPENDIX = """
+<h2 id="appendix" class="appendix">Appendix: method and guidelines</h2><div class="appendix">
+<p>livesweep follows the frequency-response method of Tischler &amp; Remple (<i>Aircraft and Rotorcraft System
+Identification</i>, AIAA, 2nd ed. 2012). The steps and the numbers this report tests:</p>
+<ol>
+<li><b>Data consistency.</b> Signals are resampled onto one uniform grid; gaps are excluded (not interpolated) from
+spectral windows; wild points are replaced by a Hampel filter and counted; trims are removed. Where an attitude and
+its rate are both logged, the attitude is compared with the integral of the rate for scale factor, time skew and
+rate bias.</li>
+<li><b>Frequency responses.</b> Each window length gives Hann-tapered, 80 % overlapped segments; auto- and
+cross-spectra are averaged; the windows are combined into one composite estimate weighted by their random error.
+With several inputs the responses are conditioned on the other inputs (MISO), with partial coherence. The random
+error of a point is ε<sub>r</sub> = √(1 − γ²) / (|γ| √(2 n<sub>d</sub>)) with n<sub>d</sub> the effective number of
+averages. A point is adequate when γ² ≥ 0.6 and ε<sub>r</sub> ≤ 0.2.</li>
+<li><b>Transfer functions.</b> Gain, poles, zeros and delay minimise
+J = (20/n<sub>ω</sub>) Σ W<sub>γ</sub> [(|T̂| − |T|)² + 0.01745 (∠T̂ − ∠T)²] (magnitude in dB, phase in deg,
+W<sub>γ</sub> = [1.58 (1 − e<sup>−γ²</sup>)]², 20 points over the pair's coherent band). J ≤ 100 is acceptable,
+J ≤ 50 excellent.</li>
+<li><b>State-space derivatives.</b> The model's M, F, G, H, J and delays are fitted to every pair at once with the
+same J (J<sub>ave</sub> over the pairs). Each parameter's Cramér–Rao bound (from the Hessian of J, as a % of its
+value) should be ≤ 20 % and its insensitivity ≤ 10 %. Structure reduction removes, one at a time, the most
+insensitive parameter (I &gt; 10 %), else the one with the largest bound (CR &gt; 20 %), and keeps a removal when
+J<sub>ave</sub> rises by at most 2.</li>
+<li><b>Time-domain verification.</b> The model, unchanged, is driven with the inputs of manoeuvres not used to
+identify it. J<sub>rms</sub> (rms output error weighted as the fit weights the outputs) ≤ 2 and Theil's inequality
+coefficient TIC ≤ 0.25 per output.</li>
+<li><b>Residual loop.</b> The residual (data − model) of every pair, divided by the data's random error, is
+matched to the signatures of missing effects (delays, actuators, notch filters, structural modes, sensor skews and
+scale factors, missing derivatives). An effect is added only when an F-test on the whitened sums of squares,
+counting its parameters and the independent frequency values, finds the drop significant.</li>
+</ol>
+<p>Flags in the summary: pairs adequate over less than half their band, failed kinematic checks, J above the
+guideline, Cramér–Rao bounds above 20 % (beyond 1000 %: not identifiable, e.g. at a bound), insensitivity above
+10 %, a second-order factor with ζ &gt; 2 (two real roots fitted as one pair) or a root a decade outside the fitted
+band (degenerate fits), verification above its guidelines, and residual the catalogue cannot explain. Unstable
+modes are shown, not flagged: many airframes are unstable without their flight control system.</p></div>
+"""
+
+
+def render(report: dict) -> str:
+    """The HTML of a ``report.json`` dictionary (plots referenced as ``plots/*.png``)."""
+    summary = stage_summary(report)
+    toc = ("<p class='noprint'><a href='#summary'>summary</a> · <a href='#data'>data quality</a> · "
+           "<a href='#responses'>frequency responses</a>" + (" · <a href='#tf'>transfer functions</a>"
+                                                           if report.get("transfer_functions") else "")
+           + (" · <a href='#ss'>state space</a>" if report.get("state_space") else "")
+           + (" · <a href='#verification'>verification</a>" if report.get("verification") else "")
+           + (" · <a href='#residual'>residual loop</a>" if report.get("residual_loop") else "")
+           + " · <a href='#appendix'>method</a></p>")
+    body = (_first_screen(report, summary) + toc + _data_quality(report) + _responses(report)
+            + _transfer_functions(report) + _state_space(report) + _verification(report) + _residual(report)
+            + _APPENDIX)
+    return (f"<!doctype html><html lang='en'><head><meta charset='utf-8'><title>livesweep: {e(report['case']['name'])}"
+            f"</title><style>{_CSS}</style></head><body>{body}</body></html>")

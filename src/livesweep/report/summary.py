@@ -1,0 +1,178 @@
+"""The report's first screen: every stage that ran, its result in one line and its flags against
+the method's guidelines (the appendix of ``report.html`` states them).
+
+Works on the ``report.json`` dictionary, so the same summary is computed for a report read back
+from disk. Pure: no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+
+from livesweep.ident.accuracy import MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT
+from livesweep.ident.verify import J_RMS_MAX, TIC_MAX
+from livesweep.spectral.adequacy import MAX_RANDOM_ERROR, MIN_COHERENCE
+
+__all__ = ["GUIDELINES", "stage_summary", "modes", "cr_text"]
+
+#: The guidelines the flags test (method: Tischler & Remple; the report's appendix).
+GUIDELINES = {
+    "coherence": MIN_COHERENCE,          # gamma^2 at least this, with
+    "random_error": MAX_RANDOM_ERROR,    # eps_r at most this, counts as an adequate frequency point
+    "coverage": 0.5,             # a pair is flagged when adequate over less than this fraction of its band
+    "cost_tf": 100.0,            # J of a transfer-function fit (<= 50 excellent)
+    "cost_ss": 100.0,            # J_ave of the state-space fit
+    "cramer_rao_pct": MAX_CRAMER_RAO_PCT,          # CR bound of a parameter, % of its value
+    "insensitivity_pct": MAX_INSENSITIVITY_PCT,    # insensitivity, % of its value
+    "j_rms": J_RMS_MAX,                            # time-domain verification
+    "tic": TIC_MAX,                                # Theil inequality coefficient
+    "zeta_max": 2.0,             # a second-order factor more damped than this is two first-order ones
+    "not_identifiable_pct": 1000.0,   # CR beyond this: the data say nothing about the parameter
+}
+
+
+def cr_text(pct) -> str:
+    """A Cramer-Rao bound [% of value] for display: ``12.3``, ``> 1000 (not identifiable)``."""
+    if pct is None or not math.isfinite(pct):
+        return "not identifiable"
+    if pct > GUIDELINES["not_identifiable_pct"]:
+        return f"> {GUIDELINES['not_identifiable_pct']:.0f} (not identifiable)"
+    return f"{pct:.1f}"
+
+
+def modes(eigenvalues) -> list[dict]:
+    """One row per mode of the eigenvalues ``[[re, im], ...]``: complex pairs once (positive
+    imaginary part) with natural frequency [rad/s], damping ratio and period [s]; real roots with
+    time constant [s] (or, unstable, time to double [s])."""
+    rows = []
+    for re, im in eigenvalues:
+        if im < 0:
+            continue
+        lam = complex(re, im)
+        if im > 0:
+            wn = abs(lam)
+            rows.append({"kind": "oscillatory", "eigenvalue": [re, im], "omega_n_rad_s": wn, "zeta": -re / wn,
+                         "period_s": 2 * math.pi / im, "stable": re < 0})
+        else:
+            row = {"kind": "real", "eigenvalue": [re, 0.0], "stable": re < 0}
+            if re < 0:
+                row["time_constant_s"] = -1.0 / re
+            elif re > 0:
+                row["time_to_double_s"] = math.log(2.0) / re
+            rows.append(row)
+    rows.sort(key=lambda r: -abs(complex(*r["eigenvalue"])))
+    return rows
+
+
+def _row(stage, result, flags, info=()):
+    return {"stage": stage, "result": result, "flags": list(flags), "info": list(info),
+            "status": "flag" if flags else "pass"}
+
+
+def stage_summary(report: dict) -> list[dict]:
+    """``[{stage, result, flags, info, status}]`` for every stage in ``report["stages"]``.
+
+    ``flags`` are departures from :data:`GUIDELINES` an engineer must look at before signing;
+    ``info`` are facts worth knowing that are not failures (an unstable mode of an unstable
+    airframe, repairs made to the data).
+    """
+    g = GUIDELINES
+    out = []
+    dq = report.get("data_quality") or {}
+    ran = report.get("stages") or []
+    if "frequency-response" in ran:
+        ex = dq.get("excitation") or []
+        poor = [f"{e['output']}/{e['input']} ({100 * e['fraction_of_band']:.0f} %)" for e in ex
+                if e["fraction_of_band"] < g["coverage"]]
+        flags = []
+        if poor:
+            flags.append(f"{len(poor)} of {len(ex)} pairs adequate over less than {100 * g['coverage']:.0f} % of the band: "
+                         + ", ".join(poor))
+        for c in dq.get("kinematic_checks") or []:
+            if "error" in c:
+                flags.append(f"kinematic check {c.get('measured')} not run: {c['error']}")
+            elif not c.get("passed"):
+                flags.append(f"kinematic check {c['name']} fails (scale {c['scale_factor_error']:+.3f}, "
+                             f"skew {1000 * c['skew_s']:+.0f} ms)")
+        info = []
+        wild = sum(w.get("replaced", 0) for w in (dq.get("wild_points") or {}).values())
+        if wild:
+            info.append(f"{wild} wild point(s) replaced")
+        rep = sum(v for r in (dq.get("repairs") or {}).values() for v in r.values() if isinstance(v, (int, float)))
+        if rep:
+            info.append(f"{rep:.0f} sample repair(s) (see data quality)")
+        info += list(dq.get("notes") or [])
+        good = len(ex) - len(poor)
+        out.append(_row("frequency-response", f"{len(report.get('frequency_responses') or [])} pairs; {good} of {len(ex)} "
+                        f"adequate (γ² ≥ {g['coherence']}, ε ≤ {g['random_error']}) over at least "
+                        f"{100 * g['coverage']:.0f} % of the band", flags, info))
+    if "transfer-functions" in ran:
+        flags, parts = [], []
+        for t in report.get("transfer_functions") or []:
+            parts.append(f"{t['name']} J {t['cost']:.1f}")
+            if not t.get("converged", True):
+                flags.append(f"{t['name']}: the fit did not converge")
+            if t["cost"] > g["cost_tf"]:
+                flags.append(f"{t['name']}: J = {t['cost']:.0f} > {g['cost_tf']:.0f}")
+            bad = [k for k, v in (t.get("cramer_rao_pct") or {}).items() if v is None or v > g["cramer_rao_pct"]]
+            if bad:
+                flags.append(f"{t['name']}: CR > {g['cramer_rao_pct']:.0f} % on " + ", ".join(bad))
+            for f in t.get("factors") or []:
+                if f.get("kind") == "second" and f.get("zeta") is not None and f["zeta"] > g["zeta_max"]:
+                    flags.append(f"{t['name']}: degenerate fit, ζ = {f['zeta']:.3g} (> {g['zeta_max']:g}: two real "
+                                 "roots fitted as one oscillatory pair; try first-order factors or another band)")
+            band = t.get("band_rad_s") or []
+            for f in t.get("factors") or []:
+                w = f.get("omega") or f.get("inverse_time_constant")
+                if w is not None and len(band) == 2 and band[0] and (abs(w) < band[0] / 10 or abs(w) > band[1] * 10):
+                    flags.append(f"{t['name']}: a root at {abs(w):.3g} rad/s, a decade outside the fitted band "
+                                 f"{band[0]:.3g}-{band[1]:.3g} rad/s (not determined by the data)")
+        out.append(_row("transfer-functions", "; ".join(parts), flags))
+    if "state-space" in ran:
+        ss = report["state_space"]
+        free = [p for p in ss["parameters"] if not p["fixed"]]
+        flags, info = [], []
+        J = ss["cost"]["average"]
+        if J is None or J > g["cost_ss"]:
+            flags.append(f"J_ave = {J} > {g['cost_ss']:.0f}" if J is not None else "J_ave not finite")
+        if not ss.get("converged", True):
+            flags.append(f"the fit did not converge: {ss.get('message', '')}")
+        lost = [p["name"] for p in free if p.get("cramer_rao_pct") is None
+                or p["cramer_rao_pct"] > g["not_identifiable_pct"]]
+        if lost:
+            flags.append("not identifiable (at a bound, or the data do not determine them): " + ", ".join(lost))
+        cr = [p["name"] for p in free if p["name"] not in lost and p["cramer_rao_pct"] > g["cramer_rao_pct"]]
+        if cr:
+            flags.append(f"CR > {g['cramer_rao_pct']:.0f} %: " + ", ".join(cr))
+        ins = [p["name"] for p in free if p.get("insensitivity_pct") is not None
+               and p["insensitivity_pct"] > g["insensitivity_pct"]]
+        if ins:
+            flags.append(f"insensitivity > {g['insensitivity_pct']:.0f} %: " + ", ".join(ins))
+        unstable = [m for m in modes(ss.get("eigenvalues") or []) if not m["stable"]]
+        if unstable:
+            info.append(f"{len(unstable)} unstable mode(s) (see the mode table)")
+        removed = ss.get("removed_parameters") or []
+        if removed:
+            info.append("removed in structure reduction: " + ", ".join(removed))
+        out.append(_row("state-space", f"J_ave {J:.1f}, {len(free)} free parameters" if J is not None else
+                        f"{len(free)} free parameters", flags, info))
+    if "verification" in ran:
+        ver = report["verification"]
+        flags, parts = [], []
+        for r in ver["records"]:
+            parts.append(f"{r['label']}: J_rms {r['j_rms']:.3f}")
+            if r["j_rms"] is None or r["j_rms"] > g["j_rms"]:
+                flags.append(f"{r['label']}: J_rms = {r['j_rms']:.3f} > {g['j_rms']:g}")
+            high = [f"{o['name']} {o['tic']:.3f}" for o in r["outputs"] if o["tic"] is None or o["tic"] > g["tic"]]
+            if high:
+                flags.append(f"{r['label']}: TIC > {g['tic']:g} on " + ", ".join(high))
+        out.append(_row("verification", "; ".join(parts), flags))
+    if "residual-loop" in ran:
+        rl = report["residual_loop"]
+        flags, info = [], []
+        if rl["conclusion"].startswith("residual above noise"):
+            flags.append("residual above noise that no catalogued effect explains")
+        if rl.get("augmented_case"):
+            info.append(f"model augmented: see {rl['augmented_case']}")
+        out.append(_row("residual-loop", rl["conclusion"], flags, info))
+    return out
