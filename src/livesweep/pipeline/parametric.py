@@ -33,31 +33,56 @@ class TransferFunctionStage:
     handling: dict = None   # name -> {"measured": {...}, "fitted": {...}}
 
 
-def handling_qualities(omega, H, *, coherence=None) -> dict:
-    """Bandwidth, phase delay and omega_180 of a response (method.md §10), for the report.
+#: Output units of an angular rate (its attitude response is the rate integrated) and of an attitude.
+RATE_UNITS = ("deg/s", "rad/s")
+ATTITUDE_UNITS = ("deg", "rad")
 
-    A rate response (the usual sweep pair, e.g. p/da) is integrated to the attitude response the
-    criteria are defined on; a negative gain (control sign convention) is flipped first. Values
-    are None where the crossing is not in the data.
+
+def response_kind(output_units: str) -> str | None:
+    """``"rate"`` for an angular-rate output, ``"attitude"`` for an angle, None otherwise (the
+    handling-qualities criteria are defined on attitude responses only)."""
+    u = (output_units or "").strip()
+    return "rate" if u in RATE_UNITS else "attitude" if u in ATTITUDE_UNITS else None
+
+
+def handling_qualities(omega, H, *, coherence=None, output_units: str = "deg/s") -> dict | None:
+    """Bandwidth, phase delay and omega_180 of an attitude response, for the report.
+
+    A rate response (the usual sweep pair, e.g. p/da, output in deg/s or rad/s) is integrated to
+    the attitude response the criteria are defined on; an attitude response (output in deg or
+    rad) is used as it is; any other output (an acceleration, a sideslip) has no such criteria
+    and gives None. A negative control sense (the attitude response starting near +/-180 deg
+    at the lowest coherent frequencies, i.e. the rate response near 180 deg) is flipped first.
+    Values are None where the crossing is not in the data.
     """
     from livesweep.ident.handling import bandwidth, phase_delay
     from livesweep.spectral.response import FrequencyResponse
 
+    kind = response_kind(output_units)
+    if kind is None:
+        return None
     H = np.asarray(H, complex)
-    ok = np.isfinite(H)
-    sign = -1.0 if np.median(np.cos(np.angle(H[ok] * 1j * np.asarray(omega)[ok]))) < 0 else 1.0
+    w = np.asarray(omega, float)
     coh = np.ones(H.shape) if coherence is None else np.asarray(coherence, float)
-    resp = FrequencyResponse("y", "u", np.asarray(omega, float), sign * H, coh, np.zeros(H.shape))
-    bw = bandwidth(resp, "rate", integrate=True, min_coherence=0.6 if coherence is not None else None)
-    tau_p = phase_delay(resp, integrate=True, min_coherence=0.6 if coherence is not None else None) \
-        if bw.omega_180 is not None else None
+    ok = np.isfinite(H) & (coh >= 0.6)
+    if not ok.any():
+        ok = np.isfinite(H)
+    low = np.flatnonzero(ok)[: max(3, ok.sum() // 10)]
+    rate_like = H[low] if kind == "rate" else H[low] * 1j * w[low]      # sign from the rate response at low frequency
+    sign = -1.0 if np.median(np.cos(np.angle(rate_like))) < 0 else 1.0
+    resp = FrequencyResponse("y", "u", w, sign * H, coh, np.zeros(H.shape))
+    integrate = kind == "rate"
+    mc = 0.6 if coherence is not None else None
+    bw = bandwidth(resp, "rate", integrate=integrate, min_coherence=mc)
+    tau_p = phase_delay(resp, integrate=integrate, min_coherence=mc) if bw.omega_180 is not None else None
 
     def num(x):
         return None if x is None or not np.isfinite(x) else float(x)
 
     return {"omega_180_rad_s": num(bw.omega_180), "bandwidth_gain_rad_s": num(bw.gain),
             "bandwidth_phase_rad_s": num(bw.phase), "bandwidth_rad_s": num(bw.bandwidth),
-            "phase_delay_s": num(tau_p), "sign_flipped": sign < 0, "response": "attitude (rate / s)"}
+            "phase_delay_s": num(tau_p), "sign_flipped": sign < 0,
+            "response": "attitude (rate / s)" if integrate else "attitude"}
 
 
 def _tf_table(case: Case, name: str, raw) -> dict:
@@ -139,8 +164,12 @@ def run_transfer_function_stage(case: Case, frs: FrequencyResponseSet,
     handling = {}
     for f in fits:
         resp = frs.pair(f.output, f.input)
-        handling[f.name] = {"measured": handling_qualities(resp.omega, resp.H, coherence=resp.coherence),
-                            "fitted": handling_qualities(resp.omega, f.response(resp.omega))}
+        units = case.signals[f.output].units if f.output in case.signals else ""
+        if response_kind(units) is None:
+            continue
+        handling[f.name] = {"measured": handling_qualities(resp.omega, resp.H, coherence=resp.coherence,
+                                                           output_units=units),
+                            "fitted": handling_qualities(resp.omega, f.response(resp.omega), output_units=units)}
     return TransferFunctionStage(tuple(fits), pairs, tuple(notes), handling)
 
 
