@@ -11,7 +11,6 @@ import argparse
 import math
 import os
 import sys
-import tempfile
 from pathlib import Path
 
 from livesweep import __version__
@@ -155,7 +154,7 @@ def cmd_demo(args) -> int:
     from livesweep.telemetry.mavlink_in import MavlinkSource
     from livesweep.telemetry.recorder import McapRecorder
 
-    out_dir = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="livesweep-demo-"))
+    out_dir = Path(args.out) if args.out else Path.cwd() / "livesweep-demo"
     if out_dir.exists() and not out_dir.is_dir():
         raise ConfigError(f"--out {str(out_dir)!r} exists and is not a directory")
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -165,6 +164,7 @@ def cmd_demo(args) -> int:
         raise ConfigError(f"--speed must be > 0, got {args.speed!r}")
     name = "xv15_cruise_sweeps_da.mcap"
     print(f"livesweep {__version__} demo: {SAMPLE_LOGS[name][0]}")
+    print(f"  writing to {out_dir}")
     channels = Path(__file__).resolve().parent / "data" / "xv15_channels.toml"
     signals, _ = load_channel_map(channels)
     settings = MonitorSettings(signals=signals, inputs=("da",), outputs=("p", "r", "ay", "beta"), band_rad_s=(0.3, 20.0),
@@ -200,12 +200,55 @@ def cmd_demo(args) -> int:
     if sim.returncode not in (0, None):
         raise LivesweepError(f"the simulator failed: {sim.stderr.read().decode().strip()[-300:]}")
     _print_monitor_summary(summary)
-    print(f"  recording: {log}" + ("" if args.view else f"\n  rerun: {rrd} (open with: rerun {rrd})"))
+    print(f"  recording: {log}" + ("" if args.view else f"\n  rerun: {rrd} (open with: {_command('rerun')} {rrd})"))
     print()
     signals_text = channels.read_text()
     case = out_dir / "demo_case.toml"
     case.write_text(DEMO_CASE.format(signals=signals_text[signals_text.index("[signals.da]"):signals_text.index("[spectral]")]))
-    return cmd_identify(argparse.Namespace(case=str(case), out=str(out_dir / "report"), stage="residual-loop"))
+    code = cmd_identify(argparse.Namespace(case=str(case), out=str(out_dir / "report"), stage="residual-loop"))
+    report = out_dir / "report" / "report.html"
+    ls = _command("livesweep")
+    print(f"""
+next:
+  1. open the report in a browser: {report.resolve().as_uri()}
+  2. look at the live session again: {_command('rerun')} {rrd}
+     (or run the monitor over the recording: {ls} replay {log})
+  3. start your own case: {case} is the case file this demo identified; for your own log,
+     {ls} inspect LOG   lists what it holds and the channel maps that fit it, and
+     {ls} new-case LOG --map NAME --out case.toml   writes a case for it""")
+    return code
+
+
+def _command(name: str) -> str:
+    """How to run the console script ``name`` (``rerun``, ``livesweep``) from this environment: the
+    bare name when it is on PATH, else the one installed next to this Python (a virtual
+    environment that is not activated), else ``python -m``."""
+    import shutil
+
+    if shutil.which(name):
+        return name
+    beside = Path(sys.executable).parent / name
+    return str(beside) if beside.exists() else f"{sys.executable} -m {name}"
+
+
+def cmd_inspect(args) -> int:
+    """``livesweep inspect LOG``: topics, fields, rates, span, test points, fitting channel maps."""
+    from livesweep.inspect import format_inspection, inspect_log
+
+    print(format_inspection(inspect_log(args.log, columns=args.columns)))
+    return 0
+
+
+def cmd_new_case(args) -> int:
+    """``livesweep new-case LOG --map NAME``: an annotated case file."""
+    from livesweep.new_case import write_new_case
+
+    r = write_new_case(args.log, args.map, args.out, force=args.force)
+    if r["converted"]:
+        print(f"new-case: converted {args.log} to {r['log']}")
+    print(f"new-case: wrote {r['case']} (log {r['log']}, map {args.map}); next: edit [case] and [spectral], then\n"
+          f"  livesweep identify {r['case']} --out report")
+    return 0
 
 
 def cmd_recover(args) -> int:
@@ -605,6 +648,26 @@ def build_parser() -> argparse.ArgumentParser:
                    help="convert a damaged DataFlash or ULog log even when less than half of it is readable")
     c.set_defaults(func=cmd_convert)
 
+    ins = sub.add_parser("inspect", help="what a log holds: topics, fields with units, rates, time span, test points, "
+                                         "and the channel maps that fit it",
+                         description="Describe any log livesweep reads (MCAP, .tlog, DataFlash .bin, .px4log, ULog; "
+                                     "tables with --columns). Example: livesweep inspect flight.tlog")
+    ins.add_argument("log", help="the log")
+    ins.add_argument("--columns", help="column map (TOML) for .npy, .mat, Parquet and text tables")
+    ins.set_defaults(func=cmd_inspect)
+
+    nc = sub.add_parser("new-case", help="write an annotated case file for a log and a channel map",
+                        description="Write a case file (TOML) for LOG with the channel map MAP: the log (converted to "
+                                    "MCAP next to the case when needed), the map's [signals] and [spectral], and "
+                                    "commented templates of the later stages. Example: livesweep new-case "
+                                    "sid_roll.bin --map ardupilot-sysid-dataflash --out roll.toml")
+    nc.add_argument("log", help="the log (any format livesweep reads)")
+    nc.add_argument("--map", required=True, metavar="NAME|FILE.toml",
+                    help="a channel-map preset (`livesweep maps`, or `livesweep inspect LOG` suggests one) or map file")
+    nc.add_argument("--out", default="case.toml", help="case file to write (default: case.toml)")
+    nc.add_argument("--force", action="store_true", help="replace an existing --out")
+    nc.set_defaults(func=cmd_new_case)
+
     rc = sub.add_parser("recover", help="finish a recording whose process was killed, so any MCAP reader opens it",
                         description="Copy every complete record of an unfinished MCAP recording (no footer: its "
                                     "process was killed) into a finished file. Example: livesweep recover live.mcap")
@@ -634,7 +697,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_batch_arguments(b)
 
     d = sub.add_parser("demo", help="fly simulated XV-15 sweeps live into the monitor, record them, identify frequency responses")
-    d.add_argument("--out", help="folder for the recording, the .rrd and the report (default: a new temporary folder)")
+    d.add_argument("--out", help="folder for the recording, the .rrd and the report (default: ./livesweep-demo)")
     d.add_argument("--speed", type=_positive_float, default=10.0, help="simulator pace, x real time (default 10)")
     d.add_argument("--view", action="store_true", help="open the Rerun viewer instead of writing live.rrd")
     d.set_defaults(func=cmd_demo)
