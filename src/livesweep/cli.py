@@ -176,6 +176,9 @@ def cmd_demo(args) -> int:
     recorder = McapRecorder(log, settings=settings.to_dict(), overwrite=True,     # the demo rewrites its own folder
                             metadata={"test_point": {"aircraft": "XV-15", "manoeuvre": "aileron sweeps x2 (simulated)",
                                                      "source": "livesweep demo"}})
+    from livesweep.monitor.foxglove import write_layout
+
+    layout = write_layout(log, settings.signals, settings.inputs, settings.outputs)
     view = RerunView(list(settings.inputs), list(settings.outputs), recording_id="demo",
                      save_path=None if args.view else rrd, spawn=args.view)
     print(f"  simulator -> MAVLink 2 over udp 127.0.0.1:{port} at {args.speed:g}x real time -> monitor")
@@ -200,7 +203,8 @@ def cmd_demo(args) -> int:
     if sim.returncode not in (0, None):
         raise LivesweepError(f"the simulator failed: {sim.stderr.read().decode().strip()[-300:]}")
     _print_monitor_summary(summary)
-    print(f"  recording: {log}" + ("" if args.view else f"\n  rerun: {rrd} (open with: {_command('rerun')} {rrd})"))
+    print(f"  recording: {log} (Foxglove: open it and import the layout {layout.name})"
+          + ("" if args.view else f"\n  rerun: {rrd} (open with: {_command('rerun')} {rrd})"))
     print()
     signals_text = channels.read_text()
     case = out_dir / "demo_case.toml"
@@ -482,6 +486,10 @@ def cmd_monitor(args) -> int:
         view = _view(args, settings, "live")
         recorder = McapRecorder(args.record, settings=settings.to_dict(), overwrite=args.force,
                                 metadata={"test_point": {"source": "livesweep monitor"}}) if args.record else None
+        if recorder is not None:
+            from livesweep.monitor.foxglove import write_layout
+
+            layout = write_layout(args.record, settings.signals, settings.inputs, settings.outputs)
     except BaseException:
         for part in (*sources, publisher, view):
             if part is not None:
@@ -511,7 +519,7 @@ def cmd_monitor(args) -> int:
         status.close()
     _print_monitor_summary(summary)
     if args.record:
-        print(f"wrote {args.record}")
+        print(f"wrote {args.record} (Foxglove: open it and import the layout {layout})")
     return 0
 
 

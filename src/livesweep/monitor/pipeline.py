@@ -750,10 +750,30 @@ class MonitorPipeline:
             "coherence": {f"{o}/{i}": est.coherence[a, b].tolist() for a, o in enumerate(self.s.outputs)
                           for b, i in enumerate(self.s.inputs)},
             "adequacy": [{**r, "band": None if r["band"] is None else list(r["band"])} for r in rows],
+            "pairs": self._pair_payload(est, rows),
             "verdict": self.verdict or "WAIT", "reasons": list(self.verdict_reasons),
+            "go": 1 if self.verdict == "GO" else 0,
             "window_verdict": st.verdict,
             "alerts": [{"kind": a.kind, "message": a.message} for a in st.alerts],
         }
+
+    def _pair_payload(self, est: Estimate, rows) -> list:
+        """Per pair: the estimate over the grid and two numbers to plot against time (Foxglove:
+        ``/livesweep/estimate.pairs[:]{name=="p/da"}.median_coherence``)."""
+        frac = {(r["output"], r["input"]): r["fraction"] for r in rows}
+        out = []
+        for a, o in enumerate(self.s.outputs):
+            for b, i in enumerate(self.s.inputs):
+                coh = np.asarray(est.coherence[a, b], float)
+                ok = np.isfinite(coh)
+                out.append({"name": f"{o}/{i}", "output": o, "input": i,
+                            "omega_rad_s": est.omega.tolist(),
+                            "magnitude_db": np.asarray(est.magnitude_db[a, b], float).tolist(),
+                            "phase_deg": np.asarray(est.phase_deg[a, b], float).tolist(),
+                            "coherence": coh.tolist(),
+                            "median_coherence": float(np.median(coh[ok])) if ok.any() else float("nan"),
+                            "adequate_fraction": float(frac.get((o, i), 0.0))})
+        return out
 
     def _packets_lost(self) -> dict:
         out = {}
