@@ -115,7 +115,7 @@ def cmd_sim(args) -> int:
     return 0
 
 
-DEMO_CASE = """# Written by `livesweep demo`: the frequency-response case for the demo log (DESIGN.md §4.2).
+DEMO_CASE = """# Written by `livesweep demo`: the frequency-response case for the demo log (every key: docs/case-file.md).
 [case]
 name = "xv15-cruise-aileron-demo"
 aircraft = "XV-15"
@@ -635,7 +635,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_monitor_options(r)
     r.set_defaults(func=cmd_replay)
 
-    i = sub.add_parser("identify", help="identify from a case file (DESIGN.md §4.2) and write report.json, report.html, plots")
+    i = sub.add_parser("identify", help="identify from a case file (docs/case-file.md) and write report.json, report.html, plots")
     i.add_argument("case", help="case file (TOML)")
     i.add_argument("--out", required=True, help="folder for the report")
     i.add_argument("--stage", default="residual-loop", choices=list(STAGES),
