@@ -592,7 +592,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("sim", help="simulate a test point (sweeps or verification manoeuvres) to MCAP or live MAVLink")
     s.add_argument("--model", default="xv15-cruise", help="vehicle model: xv15-cruise, xv15-hover or quad-attitude")
-    s.add_argument("--manoeuvre", default="sweep", choices=["sweep", "doublet", "3211", "step"])
+    s.add_argument("--manoeuvre", default="sweep", choices=["sweep", "doublet", "3211", "step"],
+                   help="frequency sweeps, or a verification manoeuvre: doublet, 3-2-1-1 or step")
     s.add_argument("--axis", action="append", help="input to excite (XV-15: da, dr; quad-attitude: roll_cmd, pitch_cmd); repeat for several; default the first")
     s.add_argument("--repeat", type=int, default=2, help="sweeps per axis")
     s.add_argument("--omega-min", type=_positive_float, default=0.3, help="sweep start frequency [rad/s]")
@@ -709,7 +710,45 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--speed", type=_positive_float, default=10.0, help="simulator pace, x real time (default 10)")
     d.add_argument("--view", action="store_true", help="open the Rerun viewer instead of writing live.rrd")
     d.set_defaults(func=cmd_demo)
+    for verb, sp in sub.choices.items():
+        sp.formatter_class = _HelpFormatter
+        sp.epilog = "examples:\n" + "\n".join(f"  {line}" for line in EXAMPLES[verb])
     return p
+
+
+#: What ``livesweep VERB --help`` shows under "examples" (each line runs as written, given the files).
+EXAMPLES = {
+    "sim": ["livesweep sim --axis da --repeat 2 --out sweeps.mcap",
+            "livesweep sim --manoeuvre doublet --axis dr --amplitude 3 --effect time_delay:input=dr,delay_s=0.05 "
+            "--out verify.mcap",
+            "livesweep sim --mavlink udpout:127.0.0.1:14550 --speed 10"],
+    "monitor": ["livesweep monitor --mavlink udpin:0.0.0.0:14550 --map ardupilot-copter-quad-x --record flight.mcap "
+                "--rerun-spawn",
+                "livesweep monitor --zenoh 'drone/**' --case my_case.toml --record flight.mcap --rerun-save flight.rrd"],
+    "replay": ["livesweep replay flight.mcap", "livesweep replay flight.mcap --map ardupilot-copter-pid --speed 4"],
+    "identify": ["livesweep identify config/xv15_cruise_lateral.toml --out out/cruise",
+                 "livesweep identify my_case.toml --out out/quick --stage frequency-response --no-plots"],
+    "maps": ["livesweep maps"],
+    "convert": ["livesweep convert 00000012.BIN --out flight.mcap",
+                "livesweep convert sweep.npy --columns config/xplane_c172_columns.toml --out sweep.mcap"],
+    "inspect": ["livesweep inspect flight.tlog", "livesweep inspect sweep.npy --columns columns.toml"],
+    "new-case": ["livesweep new-case 00000012.BIN --map ardupilot-sysid-dataflash --out roll.toml"],
+    "recover": ["livesweep recover flight.mcap", "livesweep recover flight.mcap --out fixed.mcap --force"],
+    "stream": ["livesweep stream flight.tlog --mavlink udpout:127.0.0.1:14550"],
+    "batch": ["livesweep batch cases/ --out out/batch --workers 4", "livesweep batch cases/*.toml --out out/batch --no-plots"],
+    "demo": ["livesweep demo", "livesweep demo --out /tmp/demo --speed 20 --view"],
+}
+
+
+class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Keeps the examples' line breaks and shows each option's default unless its help says it."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if (not action.option_strings or "default" in text.lower() or action.default in (None, False, True)
+                or action.default is argparse.SUPPRESS or isinstance(action.default, list)):
+            return text
+        return text + " (default: %(default)s)"
 
 
 def cmd_maps(args) -> int:
