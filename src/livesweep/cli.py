@@ -606,7 +606,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="inject an effect, e.g. sensor_skew:output=p,delay_s=0.05 (repeatable)")
     s.add_argument("--no-noise", action="store_true", help="no sensor noise")
     s.add_argument("--no-turbulence", action="store_true", help="calm air")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=int, default=0, help="random seed of noise and turbulence (same seed, same log)")
     s.add_argument("--out", help="MCAP file to write")
     s.add_argument("--mavlink", help="stream MAVLink 2 to a pymavlink URL, e.g. udpout:127.0.0.1:14550")
     s.add_argument("--speed", type=_positive_float, default=1.0, help="stream pace: 1 = real time, 10 = ten times faster")
@@ -745,8 +745,9 @@ class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
 
     def _get_help_string(self, action):
         text = action.help or ""
-        if (not action.option_strings or "default" in text.lower() or action.default in (None, False, True)
-                or action.default is argparse.SUPPRESS or isinstance(action.default, list)):
+        d = action.default
+        if (not action.option_strings or "default" in text.lower() or d is None or isinstance(d, (bool, list))
+                or d is argparse.SUPPRESS):
             return text
         return text + " (default: %(default)s)"
 
