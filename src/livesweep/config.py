@@ -267,8 +267,9 @@ class Case:
     spectral : SpectralSettings or None
         From ``[spectral]``; None when the table is absent.
     tables : dict
-        The raw TOML tables of later stages (any of ``consistency``, ``transfer_functions``,
-        ``state_space``, ``verification``, ``residual`` that are present), unparsed.
+        The raw TOML tables of later stages (any of ``transfer_functions``, ``state_space``,
+        ``residual`` that are present), unparsed here; ``identify`` parses them once into typed
+        specs (:func:`livesweep.pipeline.identify.parse_case_specs`).
     """
 
     path: Path
