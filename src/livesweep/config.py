@@ -1,4 +1,4 @@
-"""Case files and channel maps (TOML, DESIGN.md §4.2): load and validate.
+"""Case files and channel maps (TOML, docs/case-file.md): load and validate.
 
 A *case file* names the records to identify from (``[[identify]]``, concatenated in order), the
 records to verify against (``[[verify]]``), where each signal lives in the logs (``[signals]``),
@@ -179,7 +179,7 @@ class SpectralSettings:
     references : tuple of str or None
         One exogenous reference per input (e.g. the logged sweep injection of a closed-loop test
         point), in ``inputs`` order; the responses are then formed as (y/r)(u/r)^-1, free of the
-        bias of disturbances fed back into the inputs (method.md §4.6). None: plain MISO.
+        bias of disturbances fed back into the inputs (docs/method.md §4.6). None: plain MISO.
     """
 
     inputs: tuple[str, ...]

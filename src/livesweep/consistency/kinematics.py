@@ -140,7 +140,7 @@ def check_angle_against_rate(
 ) -> KinematicCheck:
     """Scale factor, time skew and rate bias between a measured angle and the integral of its rate.
 
-    Model (method.md §3.3), with ``recon(t) = integral of angle_rate``::
+    Model (docs/method.md §3.3), with ``recon(t) = integral of angle_rate``::
 
         angle(t) = (1 + lambda) recon(t - dt) + a_j + b' t + noise,    b = -b' / (1 + lambda)
 
@@ -163,7 +163,7 @@ def check_angle_against_rate(
        then bounded Brent refinement to 1e-5 s around the best grid point.
     3. Rate bias: with ``lambda`` and ``dt`` fixed, ``angle - (1 + lambda) recon(t - dt)`` is fitted
        by least squares with one constant per stretch and one common slope ``b'`` (full band,
-       method.md §3.3 "Biases"). ``rms_residual`` is the RMS of that fit's residual.
+       docs/method.md §3.3 "Biases"). ``rms_residual`` is the RMS of that fit's residual.
 
     The time-domain form was chosen over the cross-spectrum form because it needs no window
     choice, uses gaps naturally (each stretch is its own record with its own constant) and gives

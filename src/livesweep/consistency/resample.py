@@ -101,7 +101,7 @@ class UniformRecord:
         Per signal.
     joins : tuple of int
         Sample indices where concatenated records meet (the first sample of each later part);
-        empty for a single record. Spectral windows may span them (method.md §4.1: records start and
+        empty for a single record. Spectral windows may span them (docs/method.md §4.1: records start and
         end in trim, and the frequency-response stage removes each part's trim first).
     labels : tuple of str
         Record labels, one per concatenated part.

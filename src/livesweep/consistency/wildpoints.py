@@ -1,4 +1,4 @@
-"""Wild-point (spike) detection and replacement: a vectorised Hampel filter (method.md §3.5).
+"""Wild-point (spike) detection and replacement: a vectorised Hampel filter (docs/method.md §3.5).
 
 A sample is a wild point when it is far from the median of its neighbours, measured in a robust
 local scale (1.4826 x the median absolute deviation, MAD, which equals the standard deviation

@@ -1,4 +1,4 @@
-"""Edits of a ``[state_space]`` table (DESIGN.md §3) that add an effect, as a user would write
+"""Edits of a ``[state_space]`` table (docs/method.md §0) that add an effect, as a user would write
 them: new states, parameters, delays and entries, so the augmented case stays readable."""
 
 from __future__ import annotations

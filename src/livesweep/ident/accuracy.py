@@ -1,4 +1,4 @@
-"""Accuracy of identified parameters from the residual Jacobian (method.md §8.4).
+"""Accuracy of identified parameters from the residual Jacobian (docs/method.md §8.4).
 
 With ``r(theta)`` the stacked weighted residuals of :func:`livesweep.ident.cost.residuals` (so the
 total cost is ``J = sum(r^2)``, dimensionless) and ``D = dr/dtheta`` at the solution::
@@ -11,7 +11,7 @@ total cost is ``J = sum(r^2)``, dimensionless) and ``D = dr/dtheta`` at the solu
 
 Normalisation
 -------------
-This is the *raw* normalisation of method.md §8.4: no residual-variance factor, no ``dec_span``
+This is the *raw* normalisation of docs/method.md §8.4: no residual-variance factor, no ``dec_span``
 factor, i.e. the weighted residuals are treated as if each had variance 1/2. CIFER's absolute
 scaling is not public, so the bounds were calibrated against Monte-Carlo scatter instead
 (``tests/test_state_space.py::test_cramer_rao_monte_carlo``: the XV-15 cruise test point flown in
@@ -50,7 +50,7 @@ __all__ = ["Accuracy", "accuracy_from_jacobian", "MONTE_CARLO_SCATTER_OVER_CR", 
 #: over parameters (module docstring; XV-15 cruise simulator, 80 realisations).
 MONTE_CARLO_SCATTER_OVER_CR = 0.68
 
-#: Guidelines (method.md §8.4, M): CR% <= 20, I% <= 10, |rho| above 0.9 flags a trade-off.
+#: Guidelines (docs/method.md §8.4, M): CR% <= 20, I% <= 10, |rho| above 0.9 flags a trade-off.
 MAX_CRAMER_RAO_PCT = 20.0
 MAX_INSENSITIVITY_PCT = 10.0
 MAX_CORRELATION = 0.9

@@ -1,4 +1,4 @@
-"""The frequency-response identification criterion (method.md §7.1), in one place for every fitter.
+"""The frequency-response identification criterion (docs/method.md §7.1), in one place for every fitter.
 
 For one pair, at ``n_omega`` = 20 log-spaced frequencies over that pair's band::
 
@@ -7,7 +7,7 @@ For one pair, at ``n_omega`` = 20 log-spaced frequencies over that pair's band::
 
 The phase error is wrapped into (-180, 180]. Fitters minimise the sum of squares of
 :func:`residuals`, whose squares add up to exactly J, so ``J = sum(r^2)`` for any stacking of pairs.
-Guidelines (method.md §7.2): J <= 100 acceptable, J <= 50 excellent; multi-pair J_ave <= 100.
+Guidelines (docs/method.md §7.2): J <= 100 acceptable, J <= 50 excellent; multi-pair J_ave <= 100.
 """
 
 from __future__ import annotations
@@ -124,6 +124,6 @@ def residuals(pair: PairData, T_model) -> np.ndarray:
 
 
 def pair_cost(pair: PairData, T_model) -> float:
-    """J of one pair (method.md §7.1)."""
+    """J of one pair (docs/method.md §7.1)."""
     r = residuals(pair, T_model)
     return float(np.dot(r, r))

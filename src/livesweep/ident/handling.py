@@ -1,4 +1,4 @@
-"""Handling-qualities and loop quantities from frequency responses (method.md §10).
+"""Handling-qualities and loop quantities from frequency responses (docs/method.md §10).
 
 Every function takes a :class:`~livesweep.spectral.response.FrequencyResponse` or a tuple
 ``(omega, H)`` (omega [rad/s], H complex). Non-finite points (and, with ``min_coherence``, points of
@@ -7,7 +7,7 @@ value of the lowest frequency, as OFA's tools do. Crossings are located by linea
 magnitude [dB] and phase [deg] in log10(omega) between the bracketing points. A quantity whose
 crossing is not inside the data is ``None`` (not an error).
 
-Definitions (method.md §10, OFA ``BandwidthEst.m``, ``TimeDelayEst.m``, ``GainPhaseMargin.m``):
+Definitions (docs/method.md §10, OFA ``BandwidthEst.m``, ``TimeDelayEst.m``, ``GainPhaseMargin.m``):
 
 - ``omega_180``: first frequency where the unwrapped phase of the attitude response falls through -180 deg.
 - ``omega_BW,phase``: first frequency where the phase falls through -135 deg.

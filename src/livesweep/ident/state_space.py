@@ -1,6 +1,6 @@
-"""State-space derivative identification from frequency responses (DERIVID; method.md §8).
+"""State-space derivative identification from frequency responses (DERIVID; docs/method.md §8).
 
-Model (method.md §8.1)::
+Model (docs/method.md §8.1)::
 
     M x' = F x + G u(t - tau)          y = H x + J u(t - tau)
     T(jw) = [H (jw M - F)^-1 G + J] diag(exp(-jw tau_j))
@@ -11,11 +11,11 @@ delay parameter per input (optional). Units are the case file's: states and outp
 units the matrices imply (the XV-15 cases: v ft/s, p and r rad/s, phi rad; outputs deg/s, deg,
 ft/s^2, ft/s), inputs in their signal units (deg), delays in seconds, omega in rad/s.
 
-Cost (method.md §8.2): the NAVFIT cost of every pair the model's outputs and inputs cover, over
+Cost (docs/method.md §8.2): the NAVFIT cost of every pair the model's outputs and inputs cover, over
 that pair's own band at ``N_OMEGA`` = 20 log-spaced points (:mod:`livesweep.ident.cost` -- the one
 criterion), summed; ``J_ave = J / n_pairs`` (guideline J_ave <= 100, <= 50 excellent).
 
-Optimiser (method.md §8.3): :func:`scipy.optimize.least_squares` (trust-region reflective) on the
+Optimiser (docs/method.md §8.3): :func:`scipy.optimize.least_squares` (trust-region reflective) on the
 stacked residuals of :func:`livesweep.ident.cost.residuals`, with the exact Jacobian (derivatives
 of the matrices' entries times linear solves with ``jw M - F``), Jacobian-based parameter scaling
 and delays bounded to ``>= 0``. Accuracy (CR bounds, insensitivities, correlation) comes from the
@@ -42,7 +42,7 @@ from livesweep.numbers import finite_or_none as _num, frozen_array as _frozen
 __all__ = ["StateSpaceModel", "FittedParameter", "StateSpaceFit", "select_pairs", "a_priori_eliminations",
            "fit_state_space", "reduce_structure", "equation_error_start", "MAX_DELTA_COST"]
 
-#: A deletion is kept when the average cost rises by no more than this (method.md §8.5).
+#: A deletion is kept when the average cost rises by no more than this (docs/method.md §8.5).
 MAX_DELTA_COST = 2.0
 
 _MATRICES = ("M", "F", "G", "H", "J")
@@ -241,7 +241,7 @@ class StateSpaceModel:
 
     @classmethod
     def from_table(cls, table: dict, where: str = "") -> "StateSpaceModel":
-        """Build and validate a model from a case's ``[state_space]`` table (DESIGN.md §4.2).
+        """Build and validate a model from a case's ``[state_space]`` table (docs/case-file.md).
 
         Parameters
         ----------
@@ -640,7 +640,7 @@ def select_pairs(frs, model: StateSpaceModel, *, bands: dict | None = None, min_
 def a_priori_eliminations(model: StateSpaceModel, skipped_pairs) -> dict:
     """Control derivatives to remove before fitting because their pairs have no coherence.
 
-    method.md §8.2: pairs with near-zero coherence are dropped and "the matching derivatives can
+    docs/method.md §8.2: pairs with near-zero coherence are dropped and "the matching derivatives can
     be removed a priori". A parameter is matched to the skipped pair ``y/u_j`` when it appears only
     in column ``j`` of ``G`` (and of ``J``) at a state ``x_s`` that output ``y`` measures directly
     (the ``H`` row of ``y`` is a constant multiple of ``x_s`` alone, e.g. ``p`` of roll rate), and
@@ -798,7 +798,7 @@ class StateSpaceFit:
         return state_space_to_ss(self, pade_order=pade_order)
 
     def to_dict(self) -> dict:
-        """The ``report.json`` ``state_space`` form (DESIGN.md §4.3), JSON-ready (non-finite -> null)."""
+        """The ``report.json`` ``state_space`` form (docs/outputs.md, report.json), JSON-ready (non-finite -> null)."""
         return {
             "parameters": [{"name": q.name, "value": _num(q.value), "fixed": bool(q.fixed),
                             "cramer_rao": _num(q.cramer_rao), "cramer_rao_pct": _num(q.cramer_rao_pct),
@@ -923,7 +923,7 @@ def fit_state_space(model: StateSpaceModel, pairs, *, theta0=None, max_nfev: int
     ftol, xtol, gtol : float
         Convergence tolerances (see :func:`scipy.optimize.least_squares`).
     extra_starts : sequence of array_like or dict
-        Further starting points (multi-start, method.md §8.3: e.g. transfer-function results,
+        Further starting points (multi-start, docs/method.md §8.3: e.g. transfer-function results,
         a priori values, :func:`equation_error_start`); the solution with the lowest cost wins.
     skipped_pairs : sequence of (output, input, reason)
         Carried into the result (what :func:`select_pairs` skipped).
@@ -1023,7 +1023,7 @@ def reduce_structure(model: StateSpaceModel, pairs, fit: StateSpaceFit | None = 
                      max_insensitivity_pct: float = MAX_INSENSITIVITY_PCT,
                      max_cramer_rao_pct: float = MAX_CRAMER_RAO_PCT, max_delta_cost: float = MAX_DELTA_COST,
                      keep=(), max_steps: int = 50, **fit_kw) -> StateSpaceFit:
-    """Model-structure reduction (method.md §8.5).
+    """Model-structure reduction (docs/method.md §8.5).
 
     Repeatedly: if some free parameter has I% > ``max_insensitivity_pct``, try deleting the most
     insensitive one; otherwise, if some has CR% > ``max_cramer_rao_pct``, try deleting the one with
@@ -1088,7 +1088,7 @@ def reduce_structure(model: StateSpaceModel, pairs, fit: StateSpaceFit | None = 
 # --- initial values ------------------------------------------------------------------------
 
 def equation_error_start(model: StateSpaceModel, frs, *, band_rad_s=None, min_coherence: float = MIN_COHERENCE):
-    """Quick initial values by frequency-domain equation error (method.md §8.3's third source).
+    """Quick initial values by frequency-domain equation error (docs/method.md §8.3's third source).
 
     Works when every state can be read from the responses: each state is either a constant,
     parameter-free multiple of one output (``H`` row with a single constant non-zero entry and a

@@ -1,6 +1,6 @@
 """Transfer-function models in the factored shorthand of the seed's Eq. 2.8, fitted with NAVFIT's cost.
 
-Shorthand (method.md §7.3): ``(1/T)`` means ``(s + 1/T)``, ``[zeta, w]`` means
+Shorthand (docs/method.md §7.3): ``(1/T)`` means ``(s + 1/T)``, ``[zeta, w]`` means
 ``(s^2 + 2 zeta w s + w^2)``, ``s`` / ``s^n`` a free differentiator (a root at the origin), the gain K
 multiplies the factored form and a delay appears as ``e^(-tau s)``::
 
@@ -17,13 +17,13 @@ roots stay real-valued parameters; a negative ``1/T`` or ``zeta`` is an unstable
 unit, times s^(relative degree)) and ``"tau"`` the delay [s], bounded ``0 <= tau <= tau_max_s``.
 
 Fitting (:func:`fit_transfer_function`) minimises the sum of squares of
-:func:`livesweep.ident.cost.residuals`, i.e. the cost J of method.md §7.1 summed over the pairs, with
+:func:`livesweep.ident.cost.residuals`, i.e. the cost J of docs/method.md §7.1 summed over the pairs, with
 ``scipy.optimize.least_squares`` (trust-region reflective, ``x_scale='jac'``, analytic Jacobian of
 the model's log-response mapped through the cost's own residual function). Several pairs may be
 fitted together with one shared denominator (the seed's Eq. 2.7: common lateral-directional
 denominator, distinct numerators with their own gain, zeros and delay).
 
-Accuracy (method.md §8.4): the Gauss-Newton Hessian of J is ``H = 2 D^T D`` with ``D = dr/dtheta``
+Accuracy (docs/method.md §8.4): the Gauss-Newton Hessian of J is ``H = 2 D^T D`` with ``D = dr/dtheta``
 at the solution; ``CR_i = sqrt((H^-1)_ii)`` (absolute, in the parameter's units) and
 ``CR_i% = 100 CR_i/|theta_i|``; insensitivity ``I_i = 1/sqrt(H_ii)``. **Normalisation.** This is the
 CIFER form; it equals the least-squares standard deviation of the estimate only when the residual
@@ -297,7 +297,7 @@ class FittedTransferFunction:
     delay_s : float
         tau [s] (0 when the model has no delay).
     cost : float
-        J of this pair (method.md §7.1).
+        J of this pair (docs/method.md §7.1).
     parameters : dict
         Key -> value: ``"gain"``, ``"tau"`` [s] (with a delay), ``"1/T"`` [rad/s], ``zeta`` [-],
         ``w`` [rad/s]; fixed values are not parameters.
@@ -365,7 +365,7 @@ class FittedTransferFunction:
         return transfer_function_to_tf(self, pade_order=pade_order)
 
     def to_dict(self) -> dict:
-        """The ``report.json`` entry (DESIGN.md §4.3): roots as ``[re, im]`` pairs [rad/s]."""
+        """The ``report.json`` entry (docs/outputs.md, report.json): roots as ``[re, im]`` pairs [rad/s]."""
         return {
             "name": self.name, "output": self.output, "input": self.input,
             "gain": _jsonf(self.gain),

@@ -1,6 +1,6 @@
-"""Time-domain verification of an identified state-space model (CIFER's VERIFY, method.md §9).
+"""Time-domain verification of an identified state-space model (CIFER's VERIFY, docs/method.md §9).
 
-The model (method.md §8.1, one delay per input)::
+The model (docs/method.md §8.1, one delay per input)::
 
     M x' = F x + G u(t - tau) + b          b: constant biases, one per state equation
     y    = H x + J u(t - tau) + y_ref      y_ref: reference shifts, one per output
@@ -32,7 +32,7 @@ the data grid, the first sample held before the record starts (records start in 
 are the simulator's own conventions (``livesweep.sim.engine``): magnitude error at most about
 ``(w dt)^2 / 8`` for the shift and ``(w dt)^2 / 12`` for the hold.
 
-Metrics (method.md §9), over the valid samples, ``r = y_data - y_model``::
+Metrics (docs/method.md §9), over the valid samples, ``r = y_data - y_model``::
 
     J_rms = sqrt( sum_o w_o sum_t r_o(t)^2 / sum_o n_t,o )       (= sqrt(1/(n_t n_o) sum r' W r))
     TIC_o = rms(r_o) / ( rms(y_data,o - y_ref,o) + rms(y_model,o - y_ref,o) )
@@ -41,7 +41,7 @@ TIC is computed on the perturbations about the fitted reference shift (the model
 perturbation from trim); for data already in perturbation form this is the textbook formula, and
 it keeps a channel's trim value (e.g. a sensor offset) from flattering its TIC.
 
-Guidelines used for ``passed`` (method.md §9: "J_rms <~ 1.0-2.0", "TIC <= 0.25-0.3"): livesweep
+Guidelines used for ``passed`` (docs/method.md §9: "J_rms <~ 1.0-2.0", "TIC <= 0.25-0.3"): livesweep
 takes the permissive end of the J_rms band, ``J_rms <= 2.0``, and the strict end of the TIC band,
 ``TIC <= 0.25`` for every output. Both limits are keyword arguments of :func:`verify`.
 
@@ -66,9 +66,9 @@ from livesweep.numbers import finite_or_none as _num
 
 __all__ = ["J_RMS_MAX", "TIC_MAX", "OutputFit", "Verification", "verify", "simulate_response"]
 
-#: Guideline: J_rms at or below this passes (method.md §9, upper end of "<~ 1.0-2.0").
+#: Guideline: J_rms at or below this passes (docs/method.md §9, upper end of "<~ 1.0-2.0").
 J_RMS_MAX = 2.0
-#: Guideline: every output's TIC at or below this passes (method.md §9, lower end of "0.25-0.3").
+#: Guideline: every output's TIC at or below this passes (docs/method.md §9, lower end of "0.25-0.3").
 TIC_MAX = 0.25
 
 _RCOND = 1e-10
@@ -187,7 +187,7 @@ class Verification:
         raise ConfigError(f"no output {name!r} in this verification; outputs are {', '.join(self.output_names)}")
 
     def to_dict(self) -> dict:
-        """The ``verification`` entry of ``report.json`` (DESIGN.md §4.3), JSON-ready.
+        """The ``verification`` entry of ``report.json`` (docs/outputs.md, report.json), JSON-ready.
 
         Returns
         -------
@@ -325,7 +325,7 @@ def _delays(tau_s, m: int) -> np.ndarray:
 def verify(M, F, G, H, J, tau, t_s, u, y, *, output_names, output_units=None, weights=None, valid=None,
            x0: str = "zero", j_rms_max: float = J_RMS_MAX, tic_max: float = TIC_MAX,
            output_delays=None, input_skews=None) -> Verification:
-    """Verify a state-space model in the time domain (method.md §9; see the module docstring).
+    """Verify a state-space model in the time domain (docs/method.md §9; see the module docstring).
 
     Parameters
     ----------
@@ -518,7 +518,7 @@ def verify(M, F, G, H, J, tau, t_s, u, y, *, output_names, output_units=None, we
 
 def _guidelines(j_rms_max: float, tic_max: float) -> dict:
     return {"j_rms_max": float(j_rms_max), "tic_max": float(tic_max),
-            "source": "method.md §9: J_rms <~ 1.0-2.0 and TIC <= 0.25-0.3 acceptable; passed = J_rms <= j_rms_max "
+            "source": "docs/method.md §9: J_rms <~ 1.0-2.0 and TIC <= 0.25-0.3 acceptable; passed = J_rms <= j_rms_max "
                       "and every output's TIC <= tic_max"}
 
 

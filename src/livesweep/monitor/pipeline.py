@@ -106,7 +106,7 @@ class MonitorSettings:
         at 1 Hz by default while the estimates themselves run at ``update_period_s``.
     references : tuple of str, optional
         One exogenous reference per input (a closed-loop test point's logged sweep injection): the
-        live responses and coherences are then formed through them (method.md §4.6), free of the
+        live responses and coherences are then formed through them (docs/method.md §4.6), free of the
         feedback bias; while a reference is silent the direct estimate is shown.
     test_points : livesweep.config.TestPointSettings, optional
         Where test points come from, which input each SystemID axis sweeps and which pairs each

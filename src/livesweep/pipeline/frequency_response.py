@@ -7,7 +7,7 @@ composite SISO (and MISO-conditioned) responses -> excitation adequacy per pair.
 Everything repaired is counted in ``data_quality``; nothing is changed silently.
 
 Concatenated records: spectral windows may span the joins, as the method concatenates repeated
-sweeps for more low-frequency averages (method.md §4.1); this is sound because flown records
+sweeps for more low-frequency averages (docs/method.md §4.1); this is sound because flown records
 start and end in trim and each part's trim is removed before the spectra.
 """
 
@@ -217,7 +217,7 @@ def run_frequency_response_stage(case: Case) -> FrequencyResponseStage:
     if refs:
         notes.append("responses formed through the exogenous references " + ", ".join(
             f"{r} -> {i}" for r, i in zip(refs, sp.inputs)) + " as (y/r)(u/r)^-1, free of the bias of disturbances "
-            "fed back into the inputs by a closed loop (method.md §4.6); frequency_responses_ordinary keeps the "
+            "fed back into the inputs by a closed loop (docs/method.md §4.6); frequency_responses_ordinary keeps the "
             "direct (biased) estimates")
     if not np.all(valid):
         notes.append(f"{int(np.sum(~valid))} samples lie in data gaps; every spectral window touching them was excluded")

@@ -35,7 +35,7 @@ def _finite(name: str, value: float) -> float:
 
 @dataclass(frozen=True)
 class FrequencySweep:
-    """Computer-generated exponential frequency sweep with trim and fades (method.md §2.3).
+    """Computer-generated exponential frequency sweep with trim and fades (docs/method.md §2.3).
 
     Within the sweep (``0 <= t_s <= duration_s``, time since the end of the leading trim)::
 

@@ -1,4 +1,4 @@
-"""Excitation adequacy of a pair: where the response is accurate enough to fit (method.md §2.5)."""
+"""Excitation adequacy of a pair: where the response is accurate enough to fit (docs/method.md §2.5)."""
 
 from __future__ import annotations
 

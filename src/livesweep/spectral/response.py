@@ -1,10 +1,10 @@
 """Frequency responses as results: one pair (:class:`FrequencyResponse`) or a MIMO set.
 
-Axis order ``(n_outputs, n_inputs, n_freq)`` (DESIGN.md §3). Results keep omega [rad/s], H,
+Axis order ``(n_outputs, n_inputs, n_freq)`` (docs/method.md §0). Results keep omega [rad/s], H,
 coherence, normalised random error and the settings that produced them; ``to_dict``/``from_dict``
 give the JSON form (``report.json`` and later stages).
 
-Arithmetic on pairs (method.md §4.6, §10): product (chain rule), ratio through a common
+Arithmetic on pairs (docs/method.md §4.6, §10): product (chain rule), ratio through a common
 reference, inverse, and the broken-loop response from closed-loop data. Random errors combine as
 ``eps^2 = eps_1^2 + eps_2^2`` and coherence as the product (a design choice: CIFER's rule for
 derived responses is not public; both make a derived response no better than its parts).
@@ -138,7 +138,7 @@ class FrequencyResponse:
                                  self.random_error, self.conditioned)
 
     def to_dict(self) -> dict:
-        """The ``report.json`` form (DESIGN.md §4.3)."""
+        """The ``report.json`` form (docs/outputs.md, report.json)."""
         return {
             "output": self.output, "input": self.input,
             "omega_rad_s": self.omega.tolist(),
@@ -160,7 +160,7 @@ class FrequencyResponse:
 
 def broken_loop(feedback_over_ref: FrequencyResponse, input_over_ref: FrequencyResponse,
                 negative_feedback: bool = True) -> FrequencyResponse:
-    """Broken-loop response L = y_fb/u from a closed-loop test with injection r (method.md §10).
+    """Broken-loop response L = y_fb/u from a closed-loop test with injection r (docs/method.md §10).
 
     With ``u = r - y_fb`` (negative feedback) ``L = (y_fb/r) / (u/r)``; with an adding junction
     (``u = r + y_fb``) ``L = -(y_fb/r) / (u/r)``.

@@ -1,6 +1,6 @@
 """Is a test point good enough? The verdict over a whole test point, from its accumulated samples.
 
-A test point is the stretch of flight in which one input is swept (method.md §2). The live monitor
+A test point is the stretch of flight in which one input is swept (docs/method.md §2). The live monitor
 collects its aligned samples and, while it runs and when it closes, asks :func:`judge_test_point`:
 
 * **Responses over the whole test point.** The same composite of several window lengths the
@@ -8,7 +8,7 @@ collects its aligned samples and, while it runs and when it closes, asks :func:`
   the only input (SISO, ordinary coherence: during a single-axis sweep the other inputs are the
   controller's reaction, not exogenous), or, when the map names the logged injection as the
   swept input's reference, the response through it (coherence "partial"). Each required pair is
-  adequate where gamma^2 >= 0.6 and eps_r <= 0.2 (method.md §2.5); its adequate fraction is
+  adequate where gamma^2 >= 0.6 and eps_r <= 0.2 (docs/method.md §2.5); its adequate fraction is
   measured in decades of the requested band, the part a record this short cannot resolve
   (3 periods in half the record) counting as not adequate.
 * **Real excitation.** The swept input's autospectrum during the test point must stand
@@ -21,7 +21,7 @@ collects its aligned samples and, while it runs and when it closes, asks :func:`
   pair is adequate over ``required_fraction`` (60 %) of the band; otherwise **NO-GO**, with what is
   missing in words an operator can act on: which band of which pair, and for a gap at the bottom
   of the band how much more low-frequency sweep it needs (4 periods of its lowest frequency,
-  method.md §2.5: T_rec >= 4-5 T_max).
+  docs/method.md §2.5: T_rec >= 4-5 T_max).
 
 Pure: arrays in, a frozen :class:`TestPointJudgement` out.
 """
@@ -45,10 +45,10 @@ __all__ = ["PairJudgement", "TestPointJudgement", "judge_test_point", "REQUIRED_
 
 #: The swept input's power must stand this far above its pre-test level [dB].
 EXCITATION_MARGIN_DB = 10.0
-#: Periods of its lowest frequency a sweep needs to resolve it (method.md §2.5, T_rec >= 4-5 T_max).
+#: Periods of its lowest frequency a sweep needs to resolve it (docs/method.md §2.5, T_rec >= 4-5 T_max).
 LOW_FREQUENCY_PERIODS = 4.0
 #: The swept input's power counts where it is within this of its 90th percentile over the band [dB]
-#: (method.md §2.5: no holes deeper than about 20 dB; an exponential sweep over two decades slopes 17-18).
+#: (docs/method.md §2.5: no holes deeper than about 20 dB; an exponential sweep over two decades slopes 17-18).
 COVERAGE_DROP_DB = 20.0
 #: Adequate stretches narrower than this [decades] do not split what is missing into pieces.
 _MIN_ISLAND_DECADES = 0.1
@@ -116,7 +116,7 @@ class TestPointJudgement:
     resolvable_from_rad_s: float
 
     def to_dict(self) -> dict:
-        """The ``pairs``/``missing`` part of the ``/livesweep/test_point`` record (DESIGN.md §4.5)."""
+        """The ``pairs``/``missing`` part of the ``/livesweep/test_point`` record (docs/outputs.md, live result channels)."""
         return {
             "swept_input": self.swept_input, "verdict": self.verdict, "duration_s": round(self.duration_s, 3),
             "pairs": [{"output": p.output, "input": p.input, "adequate_fraction": round(p.adequate_fraction, 4),

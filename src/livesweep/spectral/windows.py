@@ -1,6 +1,6 @@
 """Overlapped, tapered windows: the segment plan, the Hann taper, and Welch's effective averages.
 
-A window of ``n`` samples is taken every ``hop = round((1 - overlap) n)`` samples (method.md
+A window of ``n`` samples is taken every ``hop = round((1 - overlap) n)`` samples (docs/method.md
 §4.1: Hann, 80 % overlap). A segment that touches an invalid sample (a long gap the resampler
 refused to interpolate) is excluded: no window ever spans missing data.
 """
@@ -108,7 +108,7 @@ def effective_averages(n_segments: int, n_per_window: int, hop: int, window: np.
     """Welch's equivalent number of independent averages for overlapped windows.
 
     ``n_eff = K / [1 + 2 sum_{j=1}^{K-1} (1 - j/K) rho(j D)]`` with ``rho(s) = (sum w_n w_{n+s})^2 /
-    (sum w_n^2)^2`` (method.md §4.5). For Hann at 80 % overlap this is about 1.9x the number of
+    (sum w_n^2)^2`` (docs/method.md §4.5). For Hann at 80 % overlap this is about 1.9x the number of
     non-overlapped windows, consistent with C_eps ~ 0.74 when n_d = T_rec/T_win.
 
     Parameters
@@ -143,7 +143,7 @@ def effective_averages(n_segments: int, n_per_window: int, hop: int, window: np.
 
 def default_windows_s(n_samples: int, sample_rate_hz: float, omega_min_rad_s: float, omega_max_rad_s: float,
                       n_windows: int = 5, min_periods: float = 3.0) -> tuple[float, ...]:
-    """Window lengths for a record and band (method.md §4.4), geometrically spaced.
+    """Window lengths for a record and band (docs/method.md §4.4), geometrically spaced.
 
     Shortest ``20 * 2 pi / omega_max`` (20 cycles of the highest frequency), at most a quarter of
     the longest and at least :data:`MIN_WINDOW_SAMPLES`; longest half the record (several

@@ -1,4 +1,4 @@
-"""From frames to uniform sample blocks on one clock: the monitor's aligner (DESIGN.md §1).
+"""From frames to uniform sample blocks on one clock: the monitor's aligner (docs/method.md §1).
 
 * **One clock.** Every signal is timed by its stamp field (vehicle time) when the channel map
   names one, else by the receive time; a map that mixes the two is refused (the clocks are not

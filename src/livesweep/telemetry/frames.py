@@ -1,4 +1,4 @@
-"""The one stream every source produces (DESIGN.md §1): frames with receive and vehicle times.
+"""The one stream every source produces (docs/method.md §1): frames with receive and vehicle times.
 
 Live MAVLink, live Zenoh, the simulator and MCAP replay all yield :class:`Frame` objects, so
 replaying a log is just another source and reproduces the live estimates exactly.
@@ -19,7 +19,7 @@ class Frame:
     Attributes
     ----------
     topic : str
-        Its MCAP topic: ``/mavlink/<MSGNAME>`` or ``/zenoh/<key expression>`` (DESIGN.md §4.1).
+        Its MCAP topic: ``/mavlink/<MSGNAME>`` or ``/zenoh/<key expression>`` (docs/outputs.md, MCAP recordings).
     receive_ns : int
         Receive time [ns since the UNIX epoch] (the MCAP ``log_time``).
     vehicle_ns : int or None

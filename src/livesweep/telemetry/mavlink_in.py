@@ -2,7 +2,7 @@
 
 Both sources turn each decoded MAVLink message into a :class:`~livesweep.telemetry.frames.Frame`:
 
-* ``topic``      ``/mavlink/<MSGNAME>`` (DESIGN.md §4.1);
+* ``topic``      ``/mavlink/<MSGNAME>`` (docs/outputs.md, MCAP recordings);
 * ``receive_ns`` ``time.time_ns()`` when the datagram / bytes were read (live), or the tlog
   record's own time stamp (µs -> ns) for :class:`TlogSource`;
 * ``vehicle_ns`` :func:`~livesweep.telemetry.mavlink_codec.vehicle_time_ns` (``time_usec`` or
@@ -46,7 +46,7 @@ every later genuine frame of that stream look like a replay. This module compare
 first (SHA-256 of key and frame, constant time) and only then checks and advances the stream's
 time stamp (a new stream may be at most one minute older than the newest time stamp seen, as in
 the MAVLink signing specification). pymavlink itself rejects unsigned frames *without counting
-them* when no ``allow_unsigned_callback`` is installed (``reference/packages.md`` §1), so this
+them* when no ``allow_unsigned_callback`` is installed (docs/user-guide.md, MAVLink), so this
 module installs its own callback that counts them and answers ``allow_unsigned``. pymavlink also
 calls that callback for signed frames whose check failed; those are always refused here
 (``allow_unsigned`` never lets a forged signature through) and counted in ``bad_signature`` only.
@@ -63,7 +63,7 @@ after that it is only counted.
 
 Loss: ``seq_gaps`` is estimated per (sysid, compid) from ``msg.get_seq()`` (8 bits, wraps at
 256). **A gap that is a multiple of 256 frames is invisible**, and a burst of lost frames is
-only known modulo 256 (``reference/packages.md`` §1: pymavlink's ``mav_loss`` reported 0 for a
+only known modulo 256 (docs/user-guide.md, MAVLink: pymavlink's ``mav_loss`` reported 0 for a
 true loss of 1 358). Corrupted frames (``bad_crc``) also appear as gaps. The monitor must also
 check time-stamp continuity (``vehicle_ns``) to detect loss.
 
@@ -417,7 +417,7 @@ class MavlinkSource:
     allow_unsigned : bool
         Accept unsigned frames although a key is set (counted in ``unsigned_accepted``).
     rcvbuf_bytes : int
-        ``SO_RCVBUF`` asked for (the 212 KB Linux default loses bursts, packages.md §1); the
+        ``SO_RCVBUF`` asked for (the 212 KB Linux default loses bursts, docs/user-guide.md, MAVLink); the
         kernel may grant less (``net.core.rmem_max``): :attr:`rcvbuf_granted` says what it gave.
 
     UDP datagrams are parsed one by one; each may hold several frames, and a frame cut at the

@@ -1,4 +1,4 @@
-"""MCAP replay as a frame source: the same pipeline as live, from a log (DESIGN.md §1)."""
+"""MCAP replay as a frame source: the same pipeline as live, from a log (docs/method.md §1)."""
 
 from __future__ import annotations
 

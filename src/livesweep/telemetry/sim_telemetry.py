@@ -1,4 +1,4 @@
-"""Simulated test points as MAVLink telemetry: an MCAP log (DESIGN.md §4.1) or a live UDP stream.
+"""Simulated test points as MAVLink telemetry: an MCAP log (docs/outputs.md, MCAP recordings) or a live UDP stream.
 
 Each simulated signal goes where a real vehicle would send it, at that stream's rate, with the
 vehicle time stamp of the sample:
@@ -20,7 +20,7 @@ message                rate      fields (simulator units -> MAVLink units)
                                  exogenous injection (sweep, doublet, off-axis noise) before the
                                  loop's feedback, ``name`` = ``"SWEEP_INJ"``, ``x``/``y``/``z`` =
                                  da/de/dr [deg] (quadrotor: ``x``/``y`` = roll_cmd/pitch_cmd); the
-                                 common reference of method.md §4.6
+                                 common reference of docs/method.md §4.6
 ``HEARTBEAT``          1 Hz      MAV_TYPE_VTOL_TILTROTOR (quadrotor: MAV_TYPE_QUADROTOR)
 =====================  ========  =================================================================
 
@@ -188,7 +188,7 @@ def mavlink_timeline(result: SimResult, *, sysid: int = 1, compid: int = 1,
         emit("SERVO_OUTPUT_RAW", t_in, servo)
     if result.scenario.pilot is not None:
         # A closed loop feeds disturbances back into the commands; the exogenous injection is the
-        # reference that removes that bias (method.md §4.6), so it is logged as flown.
+        # reference that removes that bias (docs/method.md §4.6), so it is logged as flown.
         inj = {f: np.float64(0.0) for f in ("x", "y", "z")}
         for name, field in INJECTION_FIELD.items():
             if name in result.injections:

@@ -1,6 +1,6 @@
 """Zenoh input (JSON samples -> :class:`~livesweep.telemetry.frames.Frame`) and JSON output.
 
-Configuration (``reference/packages.md`` §2): a Zenoh peer listens on ``tcp/[::]:0`` (all
+Configuration (docs/user-guide.md, Zenoh): a Zenoh peer listens on ``tcp/[::]:0`` (all
 interfaces) unless told otherwise, and scouts by UDP multicast. :func:`zenoh_config` never
 keeps that default: it listens on nothing, or on ``tcp/127.0.0.1:<port>``, with multicast and
 gossip scouting off. Real deployments (routers, TLS, several machines) pass their own JSON5
