@@ -1,4 +1,4 @@
-"""Logs in the autopilot's own format to livesweep's MCAP (DESIGN.md §4.1): ``livesweep convert``.
+"""Logs in the autopilot's own format to livesweep's MCAP (docs/outputs.md, MCAP recordings): ``livesweep convert``.
 
 Formats are recognised by content (:func:`sniff_format`), never by file name. One module per
 format converts a file with a :class:`ConversionWriter` (:mod:`livesweep.convert.common`), which

@@ -4,7 +4,7 @@ A tlog is ``[uint64 big-endian µs UNIX time][raw MAVLink frame]`` repeated. It 
 :class:`~livesweep.telemetry.mavlink_in.TlogSource` (by content; it keeps the record alignment
 through BAD_DATA, non-MAVLink records, garbage and a cut last record) and written the way
 :class:`~livesweep.telemetry.recorder.McapRecorder` writes a live link, so a converted tlog and a
-live recording of the same traffic are interchangeable (DESIGN.md §4.1):
+live recording of the same traffic are interchangeable (docs/outputs.md, MCAP recordings):
 
 * topic ``/mavlink/<MSGNAME>``, schema ``mavlink.<MSGNAME>`` (the recorder's own schema lookup:
   :func:`~livesweep.telemetry.mavlink_codec.json_schema`), message encoding ``json``;

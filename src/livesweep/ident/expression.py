@@ -1,4 +1,4 @@
-"""Matrix-entry expressions of a state-space case (DESIGN.md §4.2), parsed without ``eval``.
+"""Matrix-entry expressions of a state-space case (docs/case-file.md), parsed without ``eval``.
 
 An entry is a number, a parameter or constant name, or arithmetic of them::
 

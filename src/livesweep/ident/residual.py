@@ -112,7 +112,7 @@ def augment_table(table: dict, candidate: Candidate) -> tuple[dict, list[str]]:
 
 @dataclass(frozen=True)
 class LoopStep:
-    """One step of the residual loop (DESIGN.md §4.3 ``residual_loop.steps``).
+    """One step of the residual loop (docs/outputs.md, report.json ``residual_loop.steps``).
 
     Attributes
     ----------

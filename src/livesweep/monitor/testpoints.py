@@ -133,7 +133,7 @@ class TestPoint:
         return sum(v.shape[1] for v in self.values) / fs
 
     def record(self, state: str) -> dict:
-        """The ``/livesweep/test_point`` record (DESIGN.md §4.5), also shown while it is open."""
+        """The ``/livesweep/test_point`` record (docs/outputs.md, live result channels), also shown while it is open."""
         j = self.judgement
         out = {"state": state, "start_s": round(self.start_s, 6),
                "end_s": None if self.end_s is None else round(self.end_s, 6), "source": self.source,

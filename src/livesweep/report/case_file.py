@@ -3,7 +3,7 @@
 :func:`write_augmented_case` re-reads the original case file, replaces its ``[state_space]``
 table, makes record paths absolute (the new file lives in the report folder) and writes TOML with
 :func:`dumps_toml` (a small writer for the types a case holds: tables, arrays of tables, arrays,
-strings, numbers, booleans; parameters as inline tables, as in DESIGN.md §4.2).
+strings, numbers, booleans; parameters as inline tables, as in docs/case-file.md).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""``report.json``, ``report.html`` and plots for ``livesweep identify`` (DESIGN.md §4.3)."""
+"""``report.json``, ``report.html`` and plots for ``livesweep identify`` (docs/outputs.md, report.json)."""
 
 from __future__ import annotations
 

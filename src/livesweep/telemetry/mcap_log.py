@@ -1,6 +1,6 @@
 """MCAP logs of JSON messages with JSON Schemas: a small writer and reader.
 
-Contract (DESIGN.md §4.1): one channel per telemetry stream, message encoding ``json``, schema
+Contract (docs/outputs.md, MCAP recordings): one channel per telemetry stream, message encoding ``json``, schema
 encoding ``jsonschema``, so Foxglove and other MCAP viewers plot the logs as they are.
 ``log_time`` is the receive time and ``publish_time`` the vehicle time when the message carries
 one. Both are integer nanoseconds (uint64) on whatever epoch the producer uses.

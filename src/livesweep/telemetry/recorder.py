@@ -1,4 +1,4 @@
-"""Live MCAP recording: every received message as it came, plus livesweep's results (DESIGN.md §4.1).
+"""Live MCAP recording: every received message as it came, plus livesweep's results (docs/outputs.md, MCAP recordings).
 
 The file is written directly (not atomically: a recording must survive the process being
 killed) and the open chunk is closed and handed to the OS every ``flush_interval_s`` of wall

@@ -9,7 +9,7 @@ needs and returns them raw: on the signal's own stamp clock, at the log's own (p
 irregular) rate, with NaN where a message carried ``null``. Nothing is resampled or repaired
 here; :mod:`livesweep.consistency.resample` does that and counts what it repairs.
 
-Works on any MCAP file with JSON channels (DESIGN.md §4.1), not only MAVLink.
+Works on any MCAP file with JSON channels (docs/outputs.md, MCAP recordings), not only MAVLink.
 """
 
 from __future__ import annotations
