@@ -45,6 +45,9 @@ def test_a_killed_recording_after_recover_opens_in_the_mcap_reader(tmp_path, cap
     assert n - 4096 // 70 - 1 <= len(msgs) < n
     assert [t for t, _ in msgs] == [1_000_000_000 + 20_000_000 * k for k in range(len(msgs))]
     assert msgs[-1][1].startswith(b'{"time_boot_ms":')
+    # convert points at recover instead of refusing without a way out
+    assert cli.main(["convert", str(live), "--out", str(tmp_path / "c.mcap")]) == 2
+    assert "livesweep recover" in capsys.readouterr().err
     # a second recover refuses to overwrite unless forced
     assert cli.main(["recover", str(live)]) == 2
     assert "exists; give --force" in capsys.readouterr().err

@@ -108,6 +108,15 @@ def convert(src, out, *, force: bool = False, **options) -> ConversionResult:
     check_output(out, [src] + ([column_map] if isinstance(column_map, (str, os.PathLike)) else []), force=force)
     fmt = sniff_format(src)
     if fmt == "mcap":
+        from livesweep.telemetry.mcap_log import read_summary
+
+        try:
+            unfinished = not read_summary(src).complete
+        except LogFormatError:
+            unfinished = False
+        if unfinished:
+            raise LogFormatError(f"{src}: an unfinished MCAP recording (its process was killed): "
+                                 f"`livesweep recover {src}` writes a finished copy")
         raise LogFormatError(f"{src}: already an MCAP file; nothing to convert")
     module, func = CONVERTERS[fmt].split(":")
     return getattr(importlib.import_module(module), func)(src, out, **options)
