@@ -294,3 +294,73 @@ def test_conditioning_before_enough_segments_is_flagged_not_raised():
     est.update(x[:, :400])
     m = est.result().conditioned
     assert np.all(np.isnan(m.H)) and np.all(m.ill_conditioned) and np.all(np.isinf(m.random_error))
+
+
+def test_results_of_one_window_share_their_spectra_and_stay_valid_after_it_moves_on():
+    """While no segment enters or leaves, successive results share G and the responses (same
+    numbers, later t_end_s); a result kept from earlier still holds its own window's spectra after
+    the estimator has moved on (the running sums are never written in place)."""
+    x = _record(4000, seed=9)
+    est = OnlineSpectralEstimator(NAMES, ["u1", "u2"], ["y"], FS, BAND, window_s=20.0, segment_s=SEG_S)
+    est.update(x[:, :1610])
+    r1 = est.result()
+    est.update(x[:, 1610:1620])                      # 10 more samples: no segment completes (hop 80)
+    r2 = est.result()
+    assert r2.t_end_s > r1.t_end_s and r2.n_segments == r1.n_segments
+    np.testing.assert_array_equal(r2.segment_starts, r1.segment_starts)
+    assert r2.ordinary.H is r1.ordinary.H and r2.G is r1.G
+    assert r2.ordinary.settings["t_end_s"] == pytest.approx(1620 / FS)
+    kept = r1
+    est.update(x[:, 1620:3000])                      # many segments enter and leave
+    r3 = est.result()
+    assert r3.segment_starts[0] > kept.segment_starts[-1] - 400
+    for r in (kept, r3):
+        s = r.segment_starts
+        ref = window_spectra(x[:, s[0]:s[-1] + 400], NAMES, FS, SEG_S, BAND)
+        assert ref.n_segments == r.n_segments
+        assert _rel_err(r.G, ref.G) < TOL
+        np.testing.assert_allclose(r.ordinary.H[0, 1], ref.G[1, 2] / ref.G[1, 1].real, rtol=1e-9)
+
+
+def test_autospectra_and_cross_spectra_read_without_the_whole_matrix():
+    """``auto`` and ``cross`` (from the running sums of the inputs' rows) equal the batch matrix;
+    so does ``G`` when it is built, including the output-output block formed from the stored
+    transforms."""
+    rng = np.random.default_rng(10)
+    n = 4000
+    u = rng.standard_normal((2, n))
+    y = np.vstack([np.convolve(u[0] + u[1], np.ones(5) / 5)[:n], np.convolve(u[0], [0.5, 0.3])[:n]])
+    x = np.vstack([u, y + 0.1 * rng.standard_normal((2, n))])
+    names = ["u1", "u2", "y1", "y2"]
+    est = OnlineSpectralEstimator(names, ["u1", "u2"], ["y1", "y2"], FS, BAND, window_s=1000.0, segment_s=SEG_S)
+    _feed(est, x, [250])
+    r = est.result()
+    ws = window_spectra(x, names, FS, SEG_S, BAND)
+    np.testing.assert_allclose(r.auto, np.einsum("iif->if", ws.G).real, rtol=1e-9)
+    for a, b in [("u1", "y2"), ("y2", "u1"), ("u2", "u1"), ("y1", "y2"), ("y2", "y2")]:
+        i, j = names.index(a), names.index(b)
+        d = np.sqrt(ws.G[i, i].real * ws.G[j, j].real)
+        assert np.max(np.abs(r.cross(a, b) - ws.G[i, j]) / d) < TOL
+    assert _rel_err(r.G, ws.G) < TOL
+    assert not r.auto.flags.writeable and not r.G.flags.writeable
+
+
+def test_a_result_made_from_a_whole_matrix_gives_the_same_responses():
+    """OnlineResult built from a spectral matrix (the batch one of the same segments) reads
+    everything from it: the same responses as the estimator's result, to rounding."""
+    from livesweep.spectral.online import OnlineResult
+
+    x = _record()
+    est = OnlineSpectralEstimator(NAMES, ["u1", "u2"], ["y"], FS, BAND, window_s=1000.0, segment_s=SEG_S)
+    _feed(est, x, [321])
+    r = est.result()
+    ws = window_spectra(x, NAMES, FS, SEG_S, BAND)
+    b = OnlineResult(ws.omega, ws.names, ("u1", "u2"), ("y",), ws.G, ws.n_segments, ws.n_eff, 1000.0, SEG_S,
+                     r.t_end_s, 0.8, FS, r.segment_starts)
+    np.testing.assert_allclose(b.ordinary.H, r.ordinary.H, rtol=1e-9)
+    np.testing.assert_allclose(b.conditioned.H, r.conditioned.H, rtol=1e-8)
+    np.testing.assert_allclose(b.conditioned.multiple_coherence, r.conditioned.multiple_coherence, rtol=1e-8)
+    np.testing.assert_allclose(b.input_coherence, r.input_coherence, rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(b.auto, r.auto, rtol=1e-9)
+    np.testing.assert_allclose(b.cross("y", "u2"), ws.G[2, 1], rtol=1e-12)
+    assert b.G is not ws.G and not b.G.flags.writeable

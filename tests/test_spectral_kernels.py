@@ -9,8 +9,9 @@ from scipy import signal as sps
 from livesweep.errors import ConfigError
 from livesweep.spectral.analysis import check_settings
 from livesweep.spectral.response import FrequencyResponse, FrequencyResponseSet, broken_loop
-from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW, coherence, random_error, spectral_matrix
-from livesweep.spectral.transform import segment_transforms
+from livesweep.spectral.miso import condition_output, condition_outputs, input_coherence_max
+from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW, coherence, random_error, spectral_matrix, window_spectra
+from livesweep.spectral.transform import bin_grid, fft_length, segment_spectra, segment_transforms
 from livesweep.spectral.windows import (MIN_WINDOW_SAMPLES, default_windows_s, effective_averages, hann,
                                         plan_segments, window_samples)
 
@@ -170,3 +171,137 @@ def test_frequency_response_set_round_trips_through_its_dict():
     one = FrequencyResponse.from_dict(s.pair("r", "da").to_dict())
     np.testing.assert_allclose(one.H, s.H[1, 0], rtol=1e-12)
     np.testing.assert_allclose(one.magnitude_db, 20 * np.log10(np.abs(s.H[1, 0])))
+
+
+# ---------------------------------------------------------------------------------------------
+# zero-padded FFT evaluation (the grid the spectral code uses)
+# ---------------------------------------------------------------------------------------------
+
+def _five_smooth(k):
+    for p in (2, 3, 5):
+        while k % p == 0:
+            k //= p
+    return k == 1
+
+
+@pytest.mark.parametrize("n, oversample", [(400, 2.0), (377, 2.0), (1000, 2.0), (1024, 1.0), (999, 3.0)])
+def test_fft_length_is_fast_and_at_least_as_dense_as_asked(n, oversample):
+    n_fft = fft_length(n, oversample)
+    assert n_fft >= oversample * n - 1e-9 and _five_smooth(n_fft)
+    assert n_fft < 1.1 * oversample * n + 8                        # the next fast length, not far beyond
+    fs = 50.0
+    k0, omega = bin_grid(0.7, 11.3, n_fft, fs)
+    step = 2 * np.pi * fs / n_fft
+    assert step <= 2 * np.pi / (oversample * n / fs) * (1 + 1e-12)  # same or denser than asked
+    np.testing.assert_allclose(omega, step * np.arange(k0, k0 + omega.size), rtol=1e-14)
+    assert omega[0] <= 0.7 < omega[1] and omega[-2] < 11.3 <= omega[-1]  # the band, covered, no more
+    k0e, omega_e = bin_grid(5 * step, 20 * step, n_fft, fs)          # band edges on bins are those bins
+    assert k0e == 5 and omega_e.size == 16
+    with pytest.raises(ConfigError, match="Nyquist"):
+        bin_grid(1.0, np.pi * fs, n_fft, fs)
+
+
+def test_segment_spectra_equal_a_direct_dft_and_the_chirp_z_at_the_bins():
+    """Irregular starts (a gap) and several blocks of segments; offsets that the mean removal
+    must take out."""
+    rng = np.random.default_rng(4)
+    fs, N, n = 100.0, 20_000, 1000
+    x = rng.standard_normal((3, N)).cumsum(axis=1) * 0.05 + np.array([[3.0], [-250.0], [1e4]])
+    plan = plan_segments(N, n, 0.8)
+    starts = np.concatenate([plan.starts[:40], plan.starts[47:]])  # irregular: as around a data gap
+    n_fft = fft_length(n)
+    k0, omega = bin_grid(0.5, 40.0, n_fft, fs)
+    w = hann(n)
+    X = segment_spectra(x, starts, n, w, n_fft, k0, omega.size)
+    assert X.shape == (3, starts.size, omega.size)
+    # independent reference: the DTFT sum of the tapered, mean-removed segment at each bin
+    E = np.exp(-1j * np.outer(np.arange(n) / fs, omega))
+    for s_idx in (0, 39, 40, starts.size - 1):
+        seg = x[:, starts[s_idx]:starts[s_idx] + n]
+        direct = ((seg - seg.mean(axis=1, keepdims=True)) * w) @ E
+        np.testing.assert_allclose(X[:, s_idx], direct, rtol=0, atol=1e-9 * np.abs(direct).max())
+    Xc = segment_transforms(x, starts, n, w, omega, fs)             # chirp-z on the same frequencies
+    np.testing.assert_allclose(X, Xc, rtol=0, atol=1e-9 * np.abs(Xc).max())
+
+
+def test_window_spectra_equal_scipy_csd_with_the_same_zero_padding():
+    rng = np.random.default_rng(5)
+    fs, N = 50.0, 9000
+    x = rng.standard_normal(N)
+    y = sps.lfilter([0.2, 0.1], [1, -0.7], x) + 0.3 * rng.standard_normal(N) + 7.0
+    window_s = 7.54                                                 # 377 samples: 2 n = 754 is not a fast length
+    ws = window_spectra(np.vstack([x, y]), ["x", "y"], fs, window_s, (0.9, 20.0), overlap=0.8)
+    n = 377
+    n_fft = fft_length(n)
+    assert n_fft == 768
+    hop = int(round(0.2 * n))
+    kw = dict(fs=fs, window="hann", nperseg=n, noverlap=n - hop, nfft=n_fft, detrend="constant")
+    f, Pxy = sps.csd(x, y, **kw)
+    _, Pxx = sps.welch(x, **kw)
+    _, Cxy = sps.coherence(x, y, **kw)
+    k = np.flatnonzero(np.isin(np.round(f * n_fft / fs).astype(int), np.round(ws.omega * n_fft / (2 * np.pi * fs))))
+    np.testing.assert_allclose(ws.omega, 2 * np.pi * f[k], rtol=1e-12)
+    np.testing.assert_allclose(ws.G[0, 1], Pxy[k], rtol=1e-9)
+    np.testing.assert_allclose(ws.G[0, 0].real, Pxx[k], rtol=1e-9)
+    np.testing.assert_allclose(coherence(ws.G, 0, 1), Cxy[k], rtol=1e-9)
+
+
+@settings(max_examples=200, deadline=None)
+@given(one_minus_coh=st.floats(1e-14, 1.0), n_eff=st.floats(1.0, 1000.0))
+def test_random_error_matches_a_50_digit_evaluation(one_minus_coh, n_eff):
+    """eps_r against the closed form evaluated in 50-digit decimal arithmetic (independent of
+    numpy), including coherences within 1e-14 of 1 where the textbook root cancels."""
+    from decimal import Decimal, getcontext
+
+    getcontext().prec = 50
+    coh = 1.0 - one_minus_coh                                        # the double the function gets
+    u, n = 1 - Decimal(coh), Decimal(n_eff)                          # exact: a double is a finite decimal
+    disc = 1 - 4 * u / n
+    if disc < 0:
+        expected = np.inf
+    else:
+        one_minus_g = n / 2 * (1 - disc.sqrt())                     # smaller root of g + (1 - g)^2 / n = coh
+        g = 1 - one_minus_g
+        expected = np.inf if g <= 0 else max(float((one_minus_g / (2 * n * g)).sqrt()), 1e-6)
+        g = float(g)
+    got = float(random_error(np.array([coh]), n_eff)[0])
+    if np.isinf(expected):
+        assert np.isinf(got)
+    else:
+        # where g nears 0, eps_r moves by ~ulp / g for one ulp of coherence: the tolerance says so
+        assert got == pytest.approx(expected, rel=1e-12 + 4e-16 / g)
+
+
+def test_random_error_keeps_the_shape_and_treats_nan_as_no_coherence():
+    assert np.shape(random_error(0.6, 5.0)) == ()
+    assert random_error(np.full((2, 3), 0.6), 5.0).shape == (2, 3)
+    e = random_error(np.array([np.nan, 0.0, 1.0]), 5.0)
+    assert np.isinf(e[0]) and np.isinf(e[1]) and e[2] == 1e-6
+
+
+def test_conditioning_equals_the_schur_complement_formulas():
+    """condition_blocks (inverse of the unit-diagonal block) against an independent per-frequency
+    evaluation: H = Gxx^-1 g, noise Gnn = Gyy - g^H H, multiple coherence 1 - Gnn / Gyy, partial
+    coherence |H_i|^2 / (|H_i|^2 + Gnn [Gxx^-1]_ii)."""
+    rng = np.random.default_rng(6)
+    q, n_out, n_f, K = 3, 4, 7, 40
+    X = rng.standard_normal((q + n_out, K, n_f)) + 1j * rng.standard_normal((q + n_out, K, n_f))
+    X[q:] += 0.8 * np.einsum("oi,ikf->okf", rng.standard_normal((n_out, q)), X[:q])
+    X[1] += 0.5 * X[0]                                               # correlated inputs
+    G = np.einsum("ikf,jkf->ijf", X.conj(), X) / K
+    c = condition_outputs(G, list(range(q)), list(range(q, q + n_out)), max_input_coherence=0.5)
+    for a, o in enumerate(range(q, q + n_out)):
+        one = condition_output(G, list(range(q)), o)
+        np.testing.assert_allclose(c.H[a], one.H, rtol=1e-13)
+        for f in range(n_f):
+            A, g, gyy = G[:q, :q, f], G[:q, o, f], G[o, o, f].real
+            H = np.linalg.solve(A, g)
+            gnn = gyy - np.real(np.conj(g) @ H)
+            Ainv = np.linalg.inv(A)
+            np.testing.assert_allclose(c.H[a, :, f], H, rtol=1e-10)
+            np.testing.assert_allclose(c.multiple_coherence[a, f], 1 - gnn / gyy, rtol=1e-10)
+            pc = np.abs(H) ** 2 / (np.abs(H) ** 2 + gnn * np.real(np.diag(Ainv)))
+            np.testing.assert_allclose(c.partial_coherence[a, :, f], pc, rtol=1e-9)
+    coh01 = np.abs(G[0, 1]) ** 2 / (G[0, 0].real * G[1, 1].real)
+    assert np.all(input_coherence_max(G, [0, 1, 2]) >= coh01 - 1e-15)
+    np.testing.assert_array_equal(c.ill_conditioned[0], input_coherence_max(G, [0, 1, 2]) > 0.5)

@@ -1,7 +1,7 @@
 """From uniformly sampled signals to frequency-response sets (the FRESPID/MISOSA/COMPOSITE chain).
 
 ``analyze`` checks the settings against the record, computes one spectral matrix per window
-length (overlapped Hann windows, chirp-z on a dense grid), then composites them onto a common
+length (overlapped Hann windows, zero-padded FFT on a dense grid), then composites them onto a common
 log-spaced grid: ordinary (SISO) responses for every pair and, with more than one input,
 MISO-conditioned responses with partial and multiple coherences. With one exogenous reference per
 input (a closed-loop test point's logged sweep injection), it also forms the responses through the
@@ -17,9 +17,8 @@ import numpy as np
 
 from livesweep.errors import ConfigError
 from livesweep.limits import MAX_SPECTRAL_VALUES, window_spectra_values
-from livesweep.spectral.composite import composite_output_miso, composite_pair
+from livesweep.spectral.composite import composite_miso, composite_siso, interpolate_windows
 from livesweep.spectral.miso import input_coherence_max
-from livesweep.spectral.composite import interpolate_window
 from livesweep.spectral.reference import reference_responses
 from livesweep.spectral.response import FrequencyResponseSet
 from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW, window_spectra
@@ -175,35 +174,30 @@ def analyze(values: np.ndarray, names, sample_rate_hz: float, inputs, outputs, b
     omega = np.geomspace(band_rad_s[0], band_rad_s[1], n_freq)
     idx_in = [used.index(n) for n in inputs]
     idx_out = [used.index(n) for n in outputs]
-    shape = (len(outputs), len(inputs), omega.size)
-    H, coh, eps = np.empty(shape, complex), np.empty(shape), np.empty(shape)
-    for a, o in enumerate(idx_out):
-        for b, i in enumerate(idx_in):
-            H[a, b], coh[a, b], eps[a, b] = composite_pair(list(windows), omega, i, o)
+    interpolated = interpolate_windows(windows, omega)       # every window's matrix on the common grid, once
+    H, coh, eps = composite_siso(windows, omega, idx_in, idx_out, interpolated)
     settings = {
         "windows_s": list(windows_s), "overlap": overlap, "sample_rate_hz": sample_rate_hz,
         "band_rad_s": [float(band_rad_s[0]), float(band_rad_s[1])], "n_freq": n_freq,
-        "taper": "hann (periodic)", "transform": "chirp-z, grid 2x window resolution",
+        "taper": "hann (periodic)", "transform": "zero-padded FFT, grid 2x window resolution",
         "composite": "inverse-variance weighted spectra (livesweep.spectral.composite)",
         "averages": [{"window_s": w.window_s, "segments": w.n_segments, "n_eff": round(w.n_eff, 2),
                       "excluded_for_gaps": w.n_excluded} for w in windows],
         "windows_skipped_for_gaps_s": skipped,
     }
-    ill_in = _input_coherence_composite(windows, omega, idx_in) > max_input_coherence if len(idx_in) > 1 else None
+    ill_in = None
+    if len(idx_in) > 1:
+        ill_in = _input_coherence_composite(windows, interpolated, idx_in) > max_input_coherence
     siso = FrequencyResponseSet(tuple(outputs), tuple(inputs), omega, H, coh, eps, False, None, ill_in, settings)
     miso = None
     if len(idx_in) > 1:
-        Hm, pc, mc, em = np.empty(shape, complex), np.empty(shape), np.empty((len(outputs), omega.size)), np.empty(shape)
-        ill = np.zeros(omega.size, bool)
-        for a, o in enumerate(idx_out):
-            Hm[a], pc[a], mc[a], em[a], ill_o = composite_output_miso(list(windows), omega, idx_in, o, max_input_coherence)
-            ill |= ill_o
-        miso = FrequencyResponseSet(tuple(outputs), tuple(inputs), omega, Hm, pc, em, True, mc, ill,
+        Hm, pc, mc, em, ill_o = composite_miso(windows, omega, idx_in, idx_out, max_input_coherence, interpolated)
+        miso = FrequencyResponseSet(tuple(outputs), tuple(inputs), omega, Hm, pc, em, True, mc, np.any(ill_o, axis=0),
                                     {**settings, "max_input_coherence": max_input_coherence})
     referenced = None
     if references:
         idx_ref = [used.index(n) for n in references]
-        rr = reference_responses(list(windows), omega, idx_ref, idx_in, idx_out, max_input_coherence)
+        rr = reference_responses(list(windows), omega, idx_ref, idx_in, idx_out, max_input_coherence, interpolated)
         referenced = FrequencyResponseSet(
             tuple(outputs), tuple(inputs), omega, rr.H, rr.coherence, rr.random_error, True, rr.multiple_coherence,
             rr.ill_conditioned,
@@ -213,12 +207,27 @@ def analyze(values: np.ndarray, names, sample_rate_hz: float, inputs, outputs, b
     return SpectralAnalysis(siso, miso, windows, referenced)
 
 
-def _input_coherence_composite(windows, omega, idx_in):
+def _input_coherence_composite(windows, interpolated, idx_in):
     """Input cross-coherence on the common grid, from the shortest window able to resolve each point
-    (the most averages, so the least bias upward)."""
-    out = np.zeros(omega.size)
-    for ws in sorted(windows, key=lambda w: -w.window_s):  # the shortest usable window (most averages) wins
-        G, usable = interpolate_window(ws, omega, idx_in)
-        c = input_coherence_max(G, list(range(len(idx_in))))
-        out = np.where(usable, c, out)
+    (the most averages, so the least bias upward).
+
+    Parameters
+    ----------
+    windows : sequence of WindowSpectra
+    interpolated : list of (ndarray, ndarray)
+        The windows' matrices on the common grid and where each resolves it
+        (:func:`~livesweep.spectral.composite.interpolate_windows`).
+    idx_in : list of int
+        Input indices on the matrices' signal axes.
+
+    Returns
+    -------
+    ndarray
+        Largest input-input coherence per frequency, in [0, 1].
+    """
+    order = sorted(range(len(windows)), key=lambda k: -windows[k].window_s)
+    out = np.zeros(interpolated[0][0].shape[-1])
+    for k in order:                                 # the shortest usable window (most averages) wins
+        G, usable = interpolated[k]
+        out = np.where(usable, input_coherence_max(G, idx_in), out)
     return out

@@ -16,7 +16,7 @@ input samples received since the previous update) into an :class:`ExcitationStat
   ``map`` (a signal of the map that found nothing, and why) and ``verdict`` (the verdict changed).
 
 Fractions of the band are measured in log frequency (decades), as a Bode plot shows them: each
-point of the uniform chirp-z grid counts for the log-width of its cell.
+point of the uniform frequency grid counts for the log-width of its cell.
 """
 
 from __future__ import annotations
@@ -462,7 +462,7 @@ class ExcitationMonitor:
     def _coverage(self, result: OnlineResult, use, weights):
         cov, masks = {}, {}
         for i in self.inputs:
-            g = result.G[result.index(i), result.index(i)].real
+            g = result.auto[result.index(i)]
             gu = g[use]
             if gu.size == 0 or not np.any(gu > 0):
                 cov[i], masks[i] = 0.0, np.zeros(g.size, bool)
@@ -477,7 +477,7 @@ class ExcitationMonitor:
         """Identifies the segments (and data) a result averages, to skip re-judging unchanged spectra."""
         st = result.segment_starts
         return (result.names, result.omega.size, result.n_segments, int(st[0]), int(st[-1]), result.n_excluded,
-                float(np.sum(result.G.real)))
+                float(np.sum(result.auto)))
 
     def _judge_spectra(self, result: OnlineResult):
         """Pair statuses, coherence masks, input coverage and input-correlation alerts of one result."""
@@ -492,7 +492,7 @@ class ExcitationMonitor:
                     if np.sum(m) < 3:
                         continue
                     ga, gb = result.index(ia), result.index(ib)
-                    c = np.abs(result.G[ga, gb, m]) ** 2 / (result.G[ga, ga, m].real * result.G[gb, gb, m].real)
+                    c = np.abs(result.cross(ia, ib)[m]) ** 2 / (result.auto[ga, m] * result.auto[gb, m])
                     med = float(np.median(np.clip(c, 0.0, 1.0)))
                     if med > self.max_input_coherence:
                         alerts.append(Alert("input_correlation", f"inputs {ia} and {ib} are correlated: median "

@@ -9,7 +9,7 @@ disturbance; with one reference per input,
     y = T_yr r,   u = T_ur r   =>   T_yu = T_yr T_ur^-1
 
 is unbiased. ``T_yr`` (outputs over references) and ``T_ur`` (inputs over references) are each a
-composite MISO estimate (:func:`livesweep.spectral.composite.composite_output_miso`), then the
+composite MISO estimate (:func:`livesweep.spectral.composite.composite_miso`), then the
 matrix ratio is taken per frequency.
 
 Coherence and random error of a derived pair ``y_a / u_b``: reference ``b`` is injected on input
@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from livesweep.spectral.composite import composite_output_miso
+from livesweep.spectral.composite import composite_miso
 
 __all__ = ["ReferencedResponses", "reference_responses", "combine_legs"]
 
@@ -60,7 +60,7 @@ class ReferencedResponses:
 
 
 def reference_responses(windows, omega: np.ndarray, references: list[int], inputs: list[int], outputs: list[int],
-                        max_input_coherence: float = 0.5) -> ReferencedResponses:
+                        max_input_coherence: float = 0.5, interpolated=None) -> ReferencedResponses:
     """Outputs over inputs through one reference per input.
 
     Parameters
@@ -74,6 +74,9 @@ def reference_responses(windows, omega: np.ndarray, references: list[int], input
         ``inputs[b]``.
     max_input_coherence : float
         Reference cross-coherence above which a frequency is flagged ill-conditioned.
+    interpolated : list of (ndarray, ndarray), optional
+        :func:`livesweep.spectral.composite.interpolate_windows` of ``windows`` on ``omega``,
+        when already computed.
 
     Returns
     -------
@@ -82,19 +85,10 @@ def reference_responses(windows, omega: np.ndarray, references: list[int], input
     q = len(references)
     if len(inputs) != q:
         raise ValueError(f"one reference per input: {q} references for {len(inputs)} inputs")
-    n = omega.size
-    Tur = np.empty((len(inputs), q, n), complex)
-    pc_u, eps_u = np.empty((len(inputs), q, n)), np.empty((len(inputs), q, n))
-    ill = np.zeros(n, bool)
-    for b, i in enumerate(inputs):
-        Tur[b], pc_u[b], _, eps_u[b], ill_b = composite_output_miso(windows, omega, references, i, max_input_coherence)
-        ill |= ill_b
-    Tyr = np.empty((len(outputs), q, n), complex)
-    pc_y, eps_y = np.empty((len(outputs), q, n)), np.empty((len(outputs), q, n))
-    mc = np.empty((len(outputs), n))
-    for a, o in enumerate(outputs):
-        Tyr[a], pc_y[a], mc[a], eps_y[a], ill_a = composite_output_miso(windows, omega, references, o, max_input_coherence)
-        ill |= ill_a
+    Tur, pc_u, _, eps_u, ill_u = composite_miso(windows, omega, references, inputs, max_input_coherence, interpolated)
+    Tyr, pc_y, mc, eps_y, ill_y = composite_miso(windows, omega, references, outputs, max_input_coherence,
+                                                 interpolated)
+    ill = np.any(ill_u, axis=0) | np.any(ill_y, axis=0)
     return combine_legs(Tur, pc_u, eps_u, Tyr, pc_y, eps_y, mc, ill)
 
 

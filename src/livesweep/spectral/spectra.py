@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from livesweep.errors import ConfigError
-from livesweep.spectral.transform import segment_transforms, uniform_grid
+from livesweep.spectral.transform import bin_grid, fft_length, segment_spectra
 from livesweep.spectral.windows import effective_averages, hann, plan_segments, window_samples
 
 __all__ = ["WindowSpectra", "window_spectra", "spectral_matrix", "coherence", "debiased_coherence", "random_error"]
@@ -32,7 +32,9 @@ class WindowSpectra:
     names : tuple of str
         Signal order of the matrix.
     omega : ndarray
-        Frequencies [rad/s] (uniform CZT grid of this window).
+        Frequencies [rad/s]: the bins of this window's zero-padded FFT that cover the band
+        (:func:`livesweep.spectral.transform.bin_grid`), spacing ``2 pi / (oversample T_win)`` or
+        slightly finer.
     G : ndarray, complex, shape (n_signals, n_signals, n_freq)
         One-sided spectral densities [units_i units_j / Hz].
     window_s : float
@@ -67,9 +69,29 @@ class WindowSpectra:
 
 
 def spectral_matrix(X: np.ndarray, window: np.ndarray, sample_rate_hz: float) -> np.ndarray:
-    """``G_ij = 2 / (fs sum w^2) mean_k conj(X_ik) X_jk`` from transforms of shape (n_sig, n_seg, n_freq)."""
+    """One-sided spectral matrix ``G_ij = 2 / (fs sum w^2) mean_k conj(X_ik) X_jk``.
+
+    Parameters
+    ----------
+    X : ndarray, complex, shape (n_signals, n_segments, n_freq)
+        Segment transforms (:func:`livesweep.spectral.transform.segment_spectra`; fastest when
+        ``np.moveaxis(X, -1, 0)`` is contiguous, as there).
+    window : ndarray
+        The taper the transforms used.
+    sample_rate_hz : float
+        [Hz].
+
+    Returns
+    -------
+    ndarray, complex, shape (n_signals, n_signals, n_freq)
+        [units_i units_j / Hz].
+    """
     scale = 2.0 / (sample_rate_hz * float(np.sum(window**2)) * X.shape[1])
-    return scale * np.einsum("ikf,jkf->ijf", X.conj(), X, optimize=True)
+    Y = np.moveaxis(X, -1, 0)                                   # (n_freq, n_signals, n_segments)
+    G = np.matmul(Y.conj(), np.swapaxes(Y, 1, 2))               # one small matrix product per frequency
+    out = np.empty(G.shape[1:] + G.shape[:1], dtype=complex)
+    np.multiply(np.moveaxis(G, 0, -1), scale, out=out)
+    return out
 
 
 def coherence(G: np.ndarray, i: int, j: int) -> np.ndarray:
@@ -100,12 +122,58 @@ def random_error(coh: np.ndarray, n_eff: float, floor: float = 1e-6) -> np.ndarr
     ``eps_r = sqrt(1 - g) / (sqrt(g) sqrt(2 n_eff))`` with ``n_eff`` Welch's equivalent number of
     independent averages (no separate C_eps: the overlap is inside n_eff) and ``g`` the measured
     coherence with its few-averages bias removed (:func:`debiased_coherence`). 1 sigma of |H| is
-    about ``eps_r`` relative (8.69 eps_r dB) and of the phase ``eps_r`` rad. ``inf`` where g = 0.
+    about ``eps_r`` relative (8.69 eps_r dB) and of the phase ``eps_r`` rad. ``inf`` where g = 0
+    (and where the coherence is NaN).
+
+    ``1 - g`` is taken as ``2 (1 - coh) / (1 + sqrt(disc))``, the cancellation-free form of
+    :func:`debiased_coherence`'s root (they agree to rounding, except that this one keeps its
+    accuracy as the coherence approaches 1), so that ``eps_r^2 = (1 - coh) / (n_eff (1 +
+    sqrt(disc) - 2 (1 - coh)))``.
+
+    Parameters
+    ----------
+    coh : array_like
+        Measured (ordinary, partial or multiple) coherence.
+    n_eff : float
+        Equivalent independent averages.
+    floor : float
+        Smallest error reported.
+
+    Returns
+    -------
+    ndarray
+        eps_r, same shape as ``coh``.
     """
-    g = debiased_coherence(coh, n_eff)
+    shape = np.shape(coh)
+    u = np.array(coh, dtype=float, ndmin=1)
+    np.fmax(u, 0.0, out=u)                   # NaN counts as no coherence
+    np.fmin(u, 1.0, out=u)
+    np.subtract(1.0, u, out=u)               # 1 - coh
+    return _random_error_of_incoherence(u, n_eff, floor).reshape(shape)
+
+
+def _random_error_of_incoherence(u: np.ndarray, n_eff: float, floor: float = 1e-6) -> np.ndarray:
+    """:func:`random_error` from ``u = 1 - coh`` (a float array, values in [0, 1], at least 1-d),
+    computed in ``u``'s own storage (which it returns)."""
+    n = max(float(n_eff), 1.0)
+    # 1 - g = 2 u / (1 + sqrt(d)), d = 1 - 4 u / n, so eps_r^2 = (1 - g) / (2 n_eff g)
+    # = u / (n_eff (1 + sqrt(d) - 2 u)); a denominator <= 0 is g <= 0: inf
+    d = u * (-4.0 / n)
+    d += 1.0
+    no_root = d < 0.0 if n < 2.0 else None   # for n >= 2 the denominator is <= 0 there anyway
+    np.maximum(d, 0.0, out=d)
+    np.sqrt(d, out=d)
+    d += 1.0
+    d -= u
+    d -= u
+    if no_root is not None:
+        d[no_root] = 0.0
+    np.maximum(d, 0.0, out=d)
+    d *= max(float(n_eff), 1e-12)
     with np.errstate(divide="ignore", invalid="ignore"):
-        e = np.sqrt(1.0 - g) / (np.sqrt(g) * np.sqrt(2.0 * max(n_eff, 1e-12)))
-    return np.where(g > 0, np.maximum(e, floor), np.inf)
+        u /= d
+    np.sqrt(u, out=u)
+    return np.maximum(u, floor, out=u)
 
 
 def window_spectra(values: np.ndarray, names, sample_rate_hz: float, window_s: float, band_rad_s,
@@ -127,7 +195,9 @@ def window_spectra(values: np.ndarray, names, sample_rate_hz: float, window_s: f
     overlap : float
         Window overlap fraction (default 0.8).
     oversample : float
-        CZT grid spacing is ``2 pi / (oversample T_win)``.
+        Grid spacing at most ``2 pi / (oversample T_win)`` [rad/s]: the segments are zero-padded to
+        ``fft_length(n, oversample) >= oversample n`` samples
+        (:func:`livesweep.spectral.transform.fft_length`).
 
     Returns
     -------
@@ -143,8 +213,9 @@ def window_spectra(values: np.ndarray, names, sample_rate_hz: float, window_s: f
     if plan.n_segments == 0:
         raise ConfigError(f"no {window_s:g} s window fits between the data gaps of the record")
     w = hann(n)
-    omega = uniform_grid(band_rad_s[0], band_rad_s[1], window_s, oversample)
-    X = segment_transforms(values, plan.starts, n, w, omega, sample_rate_hz)
+    n_fft = fft_length(n, oversample)
+    k0, omega = bin_grid(band_rad_s[0], band_rad_s[1], n_fft, sample_rate_hz)
+    X = segment_spectra(values, plan.starts, n, w, n_fft, k0, omega.size)
     G = spectral_matrix(X, w, sample_rate_hz)
     return WindowSpectra(
         names=tuple(names), omega=omega, G=G, window_s=float(window_s), n_segments=plan.n_segments,
