@@ -16,6 +16,7 @@ from pathlib import Path
 from livesweep import __version__
 from livesweep.errors import ConfigError, LivesweepError
 from livesweep.pipeline import STAGES  # the stage names only: the stages load when a command runs
+from livesweep.spectral import DEFAULT_WINDOW_S
 
 EXIT_USAGE = 2
 
@@ -328,7 +329,7 @@ def _monitor_settings(args):
     return MonitorSettings(
         signals=signals, inputs=tuple(spectral.inputs), outputs=tuple(spectral.outputs),
         band_rad_s=tuple(spectral.band_rad_s), sample_rate_hz=spectral.sample_rate_hz,
-        window_s=args.window or 120.0, update_period_s=args.update_period or 0.2,
+        window_s=args.window or DEFAULT_WINDOW_S, update_period_s=args.update_period or 0.2,
         required_pairs=_required_pairs(args.require, spectral),
         saturation_limits=_saturation_limits(args.saturation, spectral),
         references=tuple(spectral.references) if spectral.references else None,
@@ -573,7 +574,7 @@ def _add_monitor_options(m) -> None:
     m.add_argument("--case", help="case file or channel map ([signals] and [spectral]); default: the XV-15 map")
     m.add_argument("--map", metavar="NAME|FILE.toml",
                    help="a channel-map preset (`livesweep maps` lists them) or map file, in place of --case")
-    m.add_argument("--window", type=_positive_float, help="sliding window [s] (default 120)")
+    m.add_argument("--window", type=_positive_float, help=f"sliding window [s] (default {DEFAULT_WINDOW_S:g})")
     m.add_argument("--update-period", type=_positive_float, help="estimate every this many seconds of data (default 0.2)")
     m.add_argument("--rerun-save", metavar="FILE.rrd", help="write the Rerun recording to a file (headless)")
     m.add_argument("--rerun-spawn", action="store_true", help="open the Rerun desktop viewer")

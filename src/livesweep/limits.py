@@ -64,8 +64,8 @@ def window_spectra_values(n_signals: int, n_samples: int, sample_rate_hz: float,
     """Complex values the transforms of one window length hold (an upper bound).
 
     Mirrors the spectral stage: windows of ``n = round(window_s * fs)`` samples every
-    ``hop = round((1 - overlap) n)`` samples, each transformed on a uniform grid over the band with
-    spacing ``2 pi / (2 window_s)`` rad/s (:func:`livesweep.spectral.transform.uniform_grid`).
+    ``hop = round((1 - overlap) n)`` samples, each transformed to the FFT bins that cover the band
+    (:func:`livesweep.spectral.transform.fft_length`, :func:`~livesweep.spectral.transform.bin_grid`).
 
     Parameters
     ----------
@@ -87,9 +87,14 @@ def window_spectra_values(n_signals: int, n_samples: int, sample_rate_hz: float,
     int
         ``max(signals x segments x frequencies, signals x signals x frequencies)``.
     """
+    from livesweep.spectral.transform import bin_grid, fft_length     # the grid the transforms really use
+
     n = max(1, int(round(window_s * sample_rate_hz)))
     hop = max(1, int(round((1.0 - overlap) * n)))
     segments = max(0, n_samples - n) // hop + 1
-    step = math.pi / window_s
-    freqs = max(2, int(math.ceil((band_rad_s[1] - band_rad_s[0]) / step)) + 1)
+    n_fft = fft_length(n)
+    try:
+        freqs = bin_grid(float(band_rad_s[0]), float(band_rad_s[1]), n_fft, sample_rate_hz)[1].size
+    except ValueError:      # a band the spectral stage refuses: bound by the bin spacing
+        freqs = max(2, int(math.ceil((band_rad_s[1] - band_rad_s[0]) * n_fft / (2 * math.pi * sample_rate_hz))) + 2)
     return max(n_signals * segments * freqs, n_signals * n_signals * freqs)

@@ -38,6 +38,7 @@ from livesweep.errors import ConfigError
 from livesweep.monitor.ingest import FrameQueue, Ingest
 from livesweep.monitor.testpoints import CLOSE_WAIT_S, GRID_TOL, SOURCES, TestPointTracker
 from livesweep.monitor.text import time_text
+from livesweep.spectral import DEFAULT_WINDOW_S
 from livesweep.spectral.excitation import Alert, ExcitationMonitor
 from livesweep.spectral.online import OnlineSpectralEstimator
 from livesweep.telemetry.align import GridAligner
@@ -119,7 +120,7 @@ class MonitorSettings:
     outputs: tuple
     band_rad_s: tuple
     sample_rate_hz: float = 50.0
-    window_s: float = 120.0
+    window_s: float = DEFAULT_WINDOW_S
     segment_s: float | None = None
     update_period_s: float = 0.2
     results_every: int = 5

@@ -52,6 +52,7 @@ from functools import cached_property
 
 import numpy as np
 
+from livesweep.spectral import DEFAULT_WINDOW_S
 from livesweep.errors import ConfigError, require_number
 from livesweep.spectral.miso import condition_blocks, input_coherence_max
 from livesweep.spectral.reference import combine_legs
@@ -60,7 +61,7 @@ from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW, _random_error_of_
 from livesweep.spectral.transform import bin_grid, fft_length, segment_spectra
 from livesweep.spectral.windows import effective_averages, hann
 
-__all__ = ["OnlineSpectralEstimator", "OnlineResult", "default_segment_s", "DRIFT_TOLERANCE"]
+__all__ = ["OnlineSpectralEstimator", "OnlineResult", "default_segment_s", "DRIFT_TOLERANCE", "DEFAULT_WINDOW_S"]
 
 #: Bound on the relative rounding error of the running sum above which it is recomputed.
 DRIFT_TOLERANCE = 1e-11
@@ -529,7 +530,7 @@ class OnlineSpectralEstimator:
         Samples flagged valid whose value was NaN/inf in some signal; they are treated as missing.
     """
 
-    def __init__(self, names, inputs, outputs, sample_rate_hz: float, band_rad_s, *, window_s: float = 60.0,
+    def __init__(self, names, inputs, outputs, sample_rate_hz: float, band_rad_s, *, window_s: float = DEFAULT_WINDOW_S,
                  segment_s: float | None = None, overlap: float = 0.8, oversample: float = 2.0,
                  max_input_coherence: float = 0.5, resync_every: int = 1000, references=()):
         self.names = tuple(str(n) for n in names)
