@@ -376,7 +376,7 @@ def _summary(results, clean):
         got_label = " + ".join(f"{k}@{w}" for k, w in (sorted(got) if right else r["added"])) or "nothing"
         if right and not r["added"]:
             got_label += " (reported not identifiable)"
-        conf[(truth_label, got_label)] += 1
+        conf[(truth_label, got_label, bool(right))] += 1
     return ok, conf
 
 
@@ -413,8 +413,8 @@ def main(argv=None) -> None:
         print(f"effect cases: right kind and place {ok}/{len(effect)} ({100 * ok / len(effect):.0f} %); "
               f"parameters within 3 CR {n_in}/{n_par}; cost halved {halved}/{sum(bool(r['added']) for r in effect)}")
         print("confusion (truth -> added):")
-        for (t, g), n in sorted(conf.items()):
-            print(f"  {n:2d}  {t:45s} -> {g}{'' if t == g else '   <-- miss'}")
+        for (t, g, right), n in sorted(conf.items()):
+            print(f"  {n:2d}  {t:45s} -> {g}{'' if right else '   <-- miss'}")
     if clean:
         fp = [r for r in clean if r["added"]]
         print(f"clean cases: false positives {len(fp)}/{len(clean)}"
