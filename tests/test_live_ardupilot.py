@@ -179,12 +179,55 @@ def test_a_test_point_cut_to_a_third_is_no_go_and_names_the_band_never_swept(run
     assert all(v["verdict"] != "GO" for v in res["verdicts"])
 
 
-def test_a_second_vehicle_on_the_link_changes_no_test_point(runs):
+def _without_system(path: Path, out: Path, sysid: int) -> int:
+    """Copy a recording (schemas, channels, attachments, metadata) without the messages of
+    ``sysid``, with the standard mcap reader and writer; returns how many were left out."""
+    import json
+
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    dropped = 0
+    with open(path, "rb") as f, open(out, "wb") as g:
+        r = make_reader(f)
+        w = Writer(g)
+        w.start(profile=r.get_header().profile, library="test")
+        schemas, channels = {}, {}
+        for schema, channel, msg in r.iter_messages(log_time_order=False):
+            if channel.id not in channels:
+                if schema is not None and schema.id not in schemas:
+                    schemas[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
+                channels[channel.id] = w.register_channel(channel.topic, channel.message_encoding,
+                                                          schemas.get(schema.id, 0) if schema else 0,
+                                                          dict(channel.metadata))
+            if channel.topic.startswith("/mavlink/") and json.loads(msg.data).get("sysid") == sysid:
+                dropped += 1
+                continue
+            w.add_message(channels[channel.id], msg.log_time, msg.data, msg.publish_time, msg.sequence)
+        for a in r.iter_attachments():
+            w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
+        for m in r.iter_metadata():
+            w.add_metadata(m.name, dict(m.metadata))
+        w.finish()
+    return dropped
+
+
+def test_a_second_vehicle_on_the_link_changes_no_test_point(runs, tmp_path):
     """System 2 (another log's chirp, its own clock and SystemID texts) on the same port: the monitor
-    keeps to system 1, counts the other, and finds the same test point as without it (the two live
-    runs differ by receive jitter only)."""
+    keeps to system 1 and counts the other. Exactly: a replay of the recording with system 2's
+    messages taken out finds the same test points, verdicts and estimates to the last digit. Live:
+    the same test point as the run without system 2 (the two runs differ by receive jitter, which on
+    a loaded machine moves the receive-timed coherence, hence the loose band on its fraction)."""
     a, b = runs["alone"], runs["second_vehicle"]
     assert "systems {1:" in b["summary"] and " 2: " in b["summary"]
+    stripped = tmp_path / "system1_only.mcap"
+    assert _without_system(b["path"], stripped, 2) > 1000          # system 2 was there, and is gone
+    with_two = _replay(b["path"], tmp_path / "with_two.mcap")
+    without = _replay(stripped, tmp_path / "without.mcap")
+    assert with_two["test_points"] == without["test_points"] and len(without["test_points"]) == 1
+    assert with_two["verdicts"] == without["verdicts"]
+    assert with_two["estimate_verdicts"] == without["estimate_verdicts"]
+    # the live run without system 2
     assert len(b["test_points"]) == len(a["test_points"]) == 1
     ta, tb = a["test_points"][0], b["test_points"][0]
     for k in ("source", "swept_input", "verdict", "note", "end_note"):
@@ -192,7 +235,7 @@ def test_a_second_vehicle_on_the_link_changes_no_test_point(runs):
     assert tb["end_s"] - tb["start_s"] == pytest.approx(ta["end_s"] - ta["start_s"], abs=0.1)
     (pa,), (pb,) = ta["pairs"], tb["pairs"]
     assert (pa["output"], pa["input"]) == (pb["output"], pb["input"])
-    assert pb["adequate_fraction"] == pytest.approx(pa["adequate_fraction"], abs=0.05)
+    assert pb["adequate_fraction"] == pytest.approx(pa["adequate_fraction"], abs=0.15)
     assert [v["verdict"] for v in b["verdicts"]] == [v["verdict"] for v in a["verdicts"]]
 
 

@@ -289,6 +289,7 @@ class MonitorPipeline:
         recent = int(round(30.0 * settings.sample_rate_hz))
         self._recent = {n: (deque(maxlen=recent), deque(maxlen=recent)) for n in settings.inputs}
         self._seen_gaps = self._seen_lost = 0
+        self._invalid_fed = 0            # invalid samples fed to the estimator so far (data time, not block time)
         self._last_view_t = -math.inf
         self._t_first: float | None = None
         self._t_data: float | None = None             # newest data time analysed [s]
@@ -554,6 +555,7 @@ class MonitorPipeline:
                 self._test_point_records(self.test_points.block(float(t[start]), block.values[:, start:stop],
                                                                 block.valid[start:stop], t[start:stop]))
                 self.estimator.update(block.values[:, start:stop], block.valid[start:stop])
+                self._invalid_fed += int(np.sum(~block.valid[start:stop]))
                 for name in self.s.inputs:
                     tt, vv = self._recent[name]
                     tt.extend(t[start:stop])
@@ -572,7 +574,9 @@ class MonitorPipeline:
         frs, coherence_kind = self.excitation.judged(res)      # shown = judged
         recent = {n: (np.asarray(tt), np.asarray(vv)) for n, (tt, vv) in self._recent.items()}
         lost = sum(self._packets_lost().values())
-        gaps = self.aligner.counts["samples_invalid"]
+        # gaps counted as the estimator meets them, so a tick reports the same gaps whatever the block sizes
+        # (a replay's blocks are longer than the live link's)
+        gaps = self._invalid_fed
         status = self.excitation.update(res, recent, gaps=gaps - self._seen_gaps, packets_lost=lost - self._seen_lost)
         self._seen_gaps, self._seen_lost = gaps, lost
         mag = 20 * np.log10(np.maximum(np.abs(frs.H), 1e-300))
