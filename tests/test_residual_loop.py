@@ -347,6 +347,28 @@ def _hover(effects, seed):
     return frs, table, fit_state_space(model, pairs)
 
 
+def test_an_effect_that_bends_the_derivatives_beyond_the_cost_guideline_is_still_found():
+    """Hover, a 5 rad/s second-order actuator on da (zeta 0.6): the derivatives bend so far to make
+    up for it that the fit fails the method's J_ave <= 100 guideline (about 320), the linear screen
+    about that fit finds no candidate significant, and the refit from the bent derivatives does not
+    converge. The loop refits the best-ranked candidates anyway, a second time from the case's own
+    starting values, and finds the actuator. Its damping is within 3 Cramer-Rao bounds of the
+    injection; its frequency within 5 % (the bound, 1.5 %, does not cover the bias the closed pilot
+    loop leaves in hover: a fit with the injection's values fixed ends at J_ave 66, not the clean
+    6-12)."""
+    from livesweep.ident.accuracy import MAX_COST_AVERAGE
+
+    frs, table, fit = _hover([make_effect("actuator_second_order", input="da", omega_rad_s=5.0, zeta=0.6)], seed=204)
+    loop = run_residual_loop(table, fit, frs)
+    assert loop.steps[0].cost_before > MAX_COST_AVERAGE
+    assert [(e["kind"], e["where"]) for e in loop.added] == [("actuator_second_order", "da")]
+    p = {x["name"]: x for x in loop.added[0]["parameters"]}
+    assert p["wn_act_da"]["value"] == pytest.approx(5.0, rel=0.05)
+    z = p["zeta_act_da"]
+    assert abs(z["value"] - 0.6) <= 3 * z["cramer_rao_pct"] / 100 * z["value"], z
+    assert loop.fit.cost_average <= 0.5 * loop.steps[0].cost_before
+
+
 @pytest.mark.parametrize("seed, delay_s", [(34, 0.1), (22, 0.05)])
 def test_a_delay_in_hover_is_added_as_a_delay_and_nothing_patches_it(seed, delay_s):
     """Hover, a pure delay on da: the one-parameter delay is what is added (not the two-parameter

@@ -44,7 +44,7 @@ import numpy as np
 from livesweep.numbers import frozen_array as _frozen
 
 __all__ = ["Accuracy", "accuracy_from_jacobian", "MONTE_CARLO_SCATTER_OVER_CR", "MAX_CRAMER_RAO_PCT",
-           "MAX_INSENSITIVITY_PCT", "MAX_CORRELATION"]
+           "MAX_INSENSITIVITY_PCT", "MAX_CORRELATION", "MAX_COST", "MAX_COST_AVERAGE"]
 
 #: Observed scatter (std) of Monte-Carlo estimates divided by the mean raw Cramer-Rao bound, median
 #: over parameters (module docstring; XV-15 cruise simulator, 80 realisations).
@@ -54,6 +54,10 @@ MONTE_CARLO_SCATTER_OVER_CR = 0.68
 MAX_CRAMER_RAO_PCT = 20.0
 MAX_INSENSITIVITY_PCT = 10.0
 MAX_CORRELATION = 0.9
+#: Cost guidelines (docs/method.md §7.2, §8.2): J <= 100 for one pair, J_ave <= 100 over the pairs of
+#: a state-space fit; above them the model does not describe the data well enough to use.
+MAX_COST = 100.0
+MAX_COST_AVERAGE = 100.0
 
 
 @dataclass(frozen=True)

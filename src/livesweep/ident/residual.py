@@ -35,7 +35,7 @@ import numpy as np
 from livesweep.effects import EFFECT_KINDS, SEARCHED_KINDS, Candidate
 from livesweep.effects.table import normalised
 from livesweep.errors import ConfigError
-from livesweep.ident.accuracy import MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT
+from livesweep.ident.accuracy import MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT
 from livesweep.ident.residual_space import (PairResidual, ResidualSpace, band_of, pair_residuals,
                                             whitened_ss)
 from livesweep.ident.selection import (FALSE_ALARM, NOISE_INFLATION, effective_points, indistinguishable, prefers,
@@ -87,6 +87,16 @@ def table_with_fit(table: dict, fit: StateSpaceFit) -> dict:
     t = copy.deepcopy(table)
     t["parameters"] = {n: {"value": float(v), **({"fixed": True} if f else {})}
                        for n, v, f in zip(fit.model.parameters, fit.theta, fit.model.fixed)}
+    return t
+
+
+def _restart(aug: dict, origin: dict) -> dict:
+    """``aug`` with the model's own parameters back at the case's starting values (``origin``'s), the
+    effects' parameters as they are."""
+    t = copy.deepcopy(aug)
+    for name, entry in origin.get("parameters", {}).items():
+        if name in t["parameters"]:
+            t["parameters"][name] = copy.deepcopy(entry)
     return t
 
 
@@ -221,6 +231,7 @@ class _Judge:
     n_points: float
     alpha: float
     n_tests: int = 1
+    origin: dict | None = None        # the case's own table: its starting values
 
     def test(self, ss_before, ss_after, k, n_model):
         return significance(ss_before, ss_after, k, self.n_points, n_model, self.n_tests, self.alpha)
@@ -292,8 +303,9 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
     if not pairs:
         raise ConfigError("residual loop: no pair of the model has usable coherence")
     fit = fit_state_space(fit.model.with_values(fit.theta), pairs)
-    table = table_with_fit(table, fit)
-    judge = _Judge(pairs, frs, verify, effective_points(pairs, getattr(frs, "settings", {})), float(false_alarm))
+    origin, table = table, table_with_fit(table, fit)
+    judge = _Judge(pairs, frs, verify, effective_points(pairs, getattr(frs, "settings", {})), float(false_alarm),
+                   origin=origin)
     steps, unexplained, n_fits = [], [], 1
     ver = verify(fit.model, fit.theta) if verify else None
     before = tuple(pair_residuals(fit.model, fit.theta, pairs, frs))
@@ -307,7 +319,14 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
         scored.sort(key=lambda x: -x[0].margin)
         ranked = [c for _, c in scored]
         strong = [c for sig, c in scored if sig.significant]
-        any_significant = bool(strong)
+        # The screen is linear about the current fit. When that fit fails the method's own J_ave
+        # guideline the model is far from the data, and the screen underrates what a refit explains
+        # (the derivatives re-adjust once the effect is in): the best-ranked are refitted anyway and
+        # the refit's own test decides.
+        inadequate = fit.cost_average > MAX_COST_AVERAGE
+        any_significant = bool(strong) or inadequate
+        if not strong and inadequate:
+            strong = ranked
         limits = _limits(cands, judge.test(ss_before, ss_before, 1, n_model).needed)
         tried, best, accepted = [], None, []
         if len(steps) < max_steps:
@@ -492,9 +511,10 @@ def _verification_change(before, after):
         return None
     ds, means = [], []
     for b, a in zip(_as_list(before), _as_list(after)):
-        ra, rb = a.measured - a.predicted, b.measured - b.predicted
-        ok = np.all(np.isfinite(ra) & np.isfinite(rb), axis=0)
-        d = np.sum(ra[:, ok] ** 2 - rb[:, ok] ** 2, axis=0)
+        with np.errstate(over="ignore", invalid="ignore"):    # a diverging model's huge residuals
+            ra, rb = a.measured - a.predicted, b.measured - b.predicted
+            ok = np.all(np.isfinite(ra) & np.isfinite(rb), axis=0)
+            d = np.sum(ra[:, ok] ** 2 - rb[:, ok] ** 2, axis=0)
         dt = float(np.median(np.diff(b.t_s))) if b.t_s.size > 1 else 1.0
         n_block = max(1, int(round(VERIFICATION_BLOCK_S / dt)))
         n_b = d.size // n_block
@@ -591,6 +611,12 @@ def _try(table, cand, fit, judge, ss_before, ver_before):
             own.append(names)
         model = StateSpaceModel.from_table(aug)
         new_fit = fit_state_space(model, pairs, max_nfev=100)
+        if not new_fit.converged and judge.origin is not None:
+            # the model's derivatives had bent to make up for the missing effect and the refit from
+            # them is stuck: start them again where the case starts them (a second start)
+            again = fit_state_space(StateSpaceModel.from_table(_restart(aug, judge.origin)), pairs, max_nfev=100)
+            if again.converged or again.cost_average < new_fit.cost_average:
+                new_fit = again
     except (ConfigError, np.linalg.LinAlgError, ValueError) as exc:
         rec.update(accepted=False, reason=f"could not re-identify: {exc}", cost_after=float("nan"), parameters=[])
         return rec, None

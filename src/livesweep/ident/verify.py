@@ -58,6 +58,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import math
+
 import numpy as np
 
 from livesweep.errors import ConfigError
@@ -456,7 +458,10 @@ def verify(M, F, G, H, J, tau, t_s, u, y, *, output_names, output_units=None, we
                      f"{np.exp(min(growth * T, 700.0)):.3g} over the {T:.3g} s record; simulated open loop anyway")
 
     n_unk = n + p + n_x0
-    if not (np.all(np.isfinite(Y)) and np.all(np.isfinite(y_u))):
+    # finite but so large that the least squares below would overflow squaring them is diverged too
+    huge = math.sqrt(np.finfo(float).max / max(Y.size, 1))
+    if not (np.all(np.isfinite(Y)) and np.all(np.isfinite(y_u))) or max(np.max(np.abs(Y), initial=0.0),
+                                                                          np.max(np.abs(y_u), initial=0.0)) > huge:
         notes.append("simulation diverged (overflow): the model cannot predict this record open loop")
         return _diverged(names, units, w, t, y, u, n, p, tau, notes, j_rms_max, tic_max, n_unk)
 
@@ -501,11 +506,14 @@ def verify(M, F, G, H, J, tau, t_s, u, y, *, output_names, output_units=None, we
             notes.append(f"output {names[o]!r} has no valid sample")
             continue
         res = y[o, sel] - pred[o, sel]
-        rms = float(np.sqrt(np.mean(res ** 2)))
-        d = float(np.sqrt(np.mean((y[o, sel] - y_ref[o]) ** 2))) + float(np.sqrt(np.mean((pred[o, sel] - y_ref[o]) ** 2)))
+        with np.errstate(over="ignore", invalid="ignore"):     # a model that diverges: J_rms not finite
+            rms = float(np.sqrt(np.mean(res ** 2)))
+            d = (float(np.sqrt(np.mean((y[o, sel] - y_ref[o]) ** 2)))
+                 + float(np.sqrt(np.mean((pred[o, sel] - y_ref[o]) ** 2))))
         tic = rms / d if d > 0 else (0.0 if rms == 0 else 1.0)
         fits.append(OutputFit(names[o], units[o], tic, rms, float(y_ref[o]), float(w[o]), k, bool(tic <= tic_max)))
-        num += w[o] * float(np.sum(res ** 2))
+        with np.errstate(over="ignore", invalid="ignore"):
+            num += w[o] * float(np.sum(res ** 2))
         den += k
     j_rms = float(np.sqrt(num / den)) if den else float("nan")
     passed = bool(np.isfinite(j_rms) and j_rms <= j_rms_max and all(f.passed for f in fits))

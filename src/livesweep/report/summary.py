@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from livesweep.ident.accuracy import MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT
+from livesweep.ident.accuracy import MAX_COST, MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT
 from livesweep.ident.verify import J_RMS_MAX, TIC_MAX
 from livesweep.spectral.adequacy import MAX_RANDOM_ERROR, MIN_COHERENCE
 
@@ -20,8 +20,8 @@ GUIDELINES = {
     "coherence": MIN_COHERENCE,          # gamma^2 at least this, with
     "random_error": MAX_RANDOM_ERROR,    # eps_r at most this, counts as an adequate frequency point
     "coverage": 0.5,             # a pair is flagged when adequate over less than this fraction of its band
-    "cost_tf": 100.0,            # J of a transfer-function fit (<= 50 excellent)
-    "cost_ss": 100.0,            # J_ave of the state-space fit
+    "cost_tf": MAX_COST,                 # J of a transfer-function fit (<= 50 excellent)
+    "cost_ss": MAX_COST_AVERAGE,         # J_ave of the state-space fit
     "cramer_rao_pct": MAX_CRAMER_RAO_PCT,          # CR bound of a parameter, % of its value
     "insensitivity_pct": MAX_INSENSITIVITY_PCT,    # insensitivity, % of its value
     "j_rms": J_RMS_MAX,                            # time-domain verification
