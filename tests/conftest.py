@@ -15,6 +15,7 @@ SLOW_MODULES = {
     "test_live_ardupilot.py", "test_residual_loop.py", "test_cli.py", "test_monitor.py", "test_online_estimator.py",
     "test_maps.py", "test_test_points.py", "test_stream_log.py", "test_monitor_hardening.py",
     "test_identify_residual_cli.py", "test_replay_logs.py", "test_identify_frequency_response.py",
+    "test_library_face.py", "test_batch.py", "test_convert_damage.py", "test_foxglove.py", "test_convert_mavlink.py",
 }
 
 
