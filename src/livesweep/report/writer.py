@@ -16,7 +16,6 @@ from livesweep.numbers import finite_or_none
 from livesweep.report.export import (RESPONSES_CSV, RESPONSES_MAT, polynomials, state_space_export,
                                      write_responses_csv, write_responses_mat)
 from livesweep.report.html import render as render_html
-from livesweep.report.plots import bode_plot
 from livesweep.report.units import parameter_units
 
 __all__ = ["write_report", "write_frequency_report", "prepare_out_dir", "save_response_set", "load_response_set",
@@ -154,6 +153,8 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
             j = next((c for o, i, c in ss_fit.cost_pairs if (o, i) == (pair.output, pair.input)), None)
             models.append(("state space" + (f" (J {j:.0f})" if j is not None else ""), pair.omega, T))
         if draw:
+            from livesweep.report.plots import bode_plot     # matplotlib only when a plot is drawn
+
             bode_plot(pair, out / rel, title=f"{case.name}: {pair.output} / {pair.input}",
                       units=(units.get(pair.output, ""), units.get(pair.input, "")), ordinary=ordinary,
                       models=models, fit_band_rad_s=band)
