@@ -140,9 +140,9 @@ def test_plain_signal_names_load(tmp_path, name):
 def test_plot_names_stay_inside_plots_and_never_collide():
     taken: set[str] = set()
     rels = [_plot_rel(s, taken) for s in ("../../x_u", "a/b_c", "a_b_c", "a_b_c", "..", "verification_0")]
-    assert rels == ["plots/_.._x_u.png", "plots/a_b_c.png", "plots/a_b_c_2.png", "plots/a_b_c_3.png", "plots/_.png",
-                    "plots/verification_0.png"]
-    assert _plot_rel("verification_0", taken) == "plots/verification_0_2.png"
+    assert rels == ["plots/_.._x_u.svg", "plots/a_b_c.svg", "plots/a_b_c_2.svg", "plots/a_b_c_3.svg", "plots/_.svg",
+                    "plots/verification_0.svg"]
+    assert _plot_rel("verification_0", taken) == "plots/verification_0_2.svg"
     for r in rels:
         assert Path(r).parent == Path("plots") and not Path(r).name.startswith(".")
 

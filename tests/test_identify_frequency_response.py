@@ -4,6 +4,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from xml.etree import ElementTree
 
 import numpy as np
 import pytest
@@ -49,10 +50,12 @@ def test_report_holds_every_pair_in_the_design_form(cruise_report):
                           "conditioned"}
         assert f["conditioned"] is True
         assert len(f["omega_rad_s"]) == len(f["magnitude_db"]) == len(f["coherence"]) == 150
-        png = out / f["plot"]
-        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+        svg = ElementTree.parse(out / f["plot"]).getroot()        # a well-formed SVG document
+        assert svg.tag == "{http://www.w3.org/2000/svg}svg"
+        labels = [g.get("data-label") for g in svg.iter("{http://www.w3.org/2000/svg}g") if g.get("data-label")]
+        assert labels[0] == "conditioned (MISO), γ² ≥ 0.6" and labels[-1] == "partial coherence"
     html = (out / "report.html").read_text()
-    assert html.count('src="data:image/png;base64,') == len(frs)     # self-contained: plots embedded
+    assert html.count('src="data:image/svg+xml;base64,') == len(frs)     # self-contained: plots embedded
     assert "p/da" in stdout and "wrote" in stdout
 
 

@@ -129,8 +129,8 @@ def test_no_python_repr_nan_or_missing_image(page):
         assert not re.search(rf"(?<![A-Za-z]){re.escape(bad)}(?![A-Za-z])", text), bad
     assert len(p.images) == len(report["frequency_responses"]) + 1 + 1          # Bode per pair, verification, loop step
     for src in p.images:
-        assert src.startswith("data:image/png;base64,")
-        assert base64.b64decode(src.split(",", 1)[1])[:8] == b"\x89PNG\r\n\x1a\n"
+        assert src.startswith("data:image/svg+xml;base64,")
+        assert base64.b64decode(src.split(",", 1)[1]).startswith(b"<svg ")
     for r in report["frequency_responses"]:
         assert (out / r["plot"]).is_file()
     assert json.loads((out / "report.json").read_text())["stages"] == report["stages"]

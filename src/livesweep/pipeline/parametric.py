@@ -12,7 +12,7 @@ import numpy as np
 
 from livesweep.config import Case, require_table
 from livesweep.errors import ConfigError, check_band, quote
-from livesweep.ident.cost import fit_points
+from livesweep.ident.cost import MIN_COHERENCE, fit_points
 from livesweep.ident.transfer_function import TransferFunctionModel, fit_transfer_function
 from livesweep.spectral.response import FrequencyResponseSet
 
@@ -64,7 +64,7 @@ def handling_qualities(omega, H, *, coherence=None, output_units: str = "deg/s")
     H = np.asarray(H, complex)
     w = np.asarray(omega, float)
     coh = np.ones(H.shape) if coherence is None else np.asarray(coherence, float)
-    ok = np.isfinite(H) & (coh >= 0.6)
+    ok = np.isfinite(H) & (coh >= MIN_COHERENCE)
     if not ok.any():
         ok = np.isfinite(H)
     low = np.flatnonzero(ok)[: max(3, ok.sum() // 10)]
@@ -72,7 +72,7 @@ def handling_qualities(omega, H, *, coherence=None, output_units: str = "deg/s")
     sign = -1.0 if np.median(np.cos(np.angle(rate_like))) < 0 else 1.0
     resp = FrequencyResponse("y", "u", w, sign * H, coh, np.zeros(H.shape))
     integrate = kind == "rate"
-    mc = 0.6 if coherence is not None else None
+    mc = MIN_COHERENCE if coherence is not None else None
     bw = bandwidth(resp, "rate", integrate=integrate, min_coherence=mc)
     tau_p = phase_delay(resp, integrate=integrate, min_coherence=mc) if bw.omega_180 is not None else None
 

@@ -15,7 +15,9 @@ from livesweep.errors import ConfigError
 from livesweep.numbers import finite_or_none
 from livesweep.report.export import (RESPONSES_CSV, RESPONSES_MAT, polynomials, state_space_export,
                                      write_responses_csv, write_responses_mat)
+from livesweep.report.chart import bode_chart, residual_chart, time_history_chart
 from livesweep.report.html import render as render_html
+from livesweep.report.svg import to_svg
 from livesweep.report.units import parameter_units
 
 __all__ = ["write_report", "write_frequency_report", "prepare_out_dir", "save_response_set", "load_response_set",
@@ -65,7 +67,7 @@ _UNSAFE_FILE_CHARS = re.compile(r"[^A-Za-z0-9_.-]")
 
 
 def _plot_rel(stem: str, taken: set[str]) -> str:
-    """``plots/<stem>.png`` with ``stem`` made a plain file name (characters other than letters,
+    """``plots/<stem>.svg`` with ``stem`` made a plain file name (characters other than letters,
     digits, ``_ . -`` become ``_``; no leading dot; at most 100 characters) and unique among
     ``taken`` (``_2``, ``_3`` ... appended), whatever the signal names: a plot never lands
     outside ``plots/`` nor overwrites another plot."""
@@ -75,7 +77,12 @@ def _plot_rel(stem: str, taken: set[str]) -> str:
         k += 1
         name = f"{safe}_{k}"
     taken.add(name)
-    return f"plots/{name}.png"
+    return f"plots/{name}.svg"
+
+
+def _write_svg(chart, path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(to_svg(chart), encoding="utf-8")
 
 
 def _atomic_write(path: Path, text: str) -> None:
@@ -153,11 +160,9 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
             j = next((c for o, i, c in ss_fit.cost_pairs if (o, i) == (pair.output, pair.input)), None)
             models.append(("state space" + (f" (J {j:.0f})" if j is not None else ""), pair.omega, T))
         if draw:
-            from livesweep.report.plots import bode_plot     # matplotlib only when a plot is drawn
-
-            bode_plot(pair, out / rel, title=f"{case.name}: {pair.output} / {pair.input}",
-                      units=(units.get(pair.output, ""), units.get(pair.input, "")), ordinary=ordinary,
-                      models=models, fit_band_rad_s=band)
+            _write_svg(bode_chart(pair, title=f"{case.name}: {pair.output} / {pair.input}",
+                                  units=(units.get(pair.output, ""), units.get(pair.input, "")), ordinary=ordinary,
+                                  models=models, fit_band_rad_s=band), out / rel)
         responses.append({**pair.to_dict(), "output_units": units.get(pair.output, ""),
                           "input_units": units.get(pair.input, ""), "plot": rel if draw else None})
     report = {
@@ -185,15 +190,14 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
         report["data_quality"]["notes"] += list(state_space.notes)
     if verification is not None:
         stages.append("verification")
-        from livesweep.report.plots import time_history_plot
-
         records = []
         for k, (label, v) in enumerate(verification.results):
             rel = _plot_rel(f"verification_{k}", taken) if draw else None
             if draw:
-                time_history_plot(v.t_s, v.measured, v.predicted, v.inputs, [o.name for o in v.outputs],
-                                  [o.units for o in v.outputs], list(verification.inputs), out / rel,
-                                  title=f"{case.name}: verification, {label}", tic=[o.tic for o in v.outputs])
+                _write_svg(time_history_chart(v.t_s, v.measured, v.predicted, v.inputs, [o.name for o in v.outputs],
+                                              [o.units for o in v.outputs], list(verification.inputs),
+                                              title=f"{case.name}: verification, {label}",
+                                              tic=[o.tic for o in v.outputs]), out / rel)
             records.append({"label": label, **v.to_dict(), "plot": rel})
         first = records[0] if records else {}
         report["verification"] = {**{k: first.get(k) for k in ("outputs", "j_rms", "passed", "guidelines")},
@@ -205,16 +209,14 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
         if residual.loop.added:      # the model with the effects the loop added
             report["residual_loop"]["matrices"] = state_space_export(residual.loop.fit, units)
             report["residual_loop"]["parameter_units"] = parameter_units(residual.loop.table, units)
-        from livesweep.report.plots import time_history_plot
-
         after = []
         for k, (label, v) in enumerate(residual.verification_after):
             rel = _plot_rel(f"residual_verification_{k}", taken) if draw else None
             if draw:
-                time_history_plot(v.t_s, v.measured, v.predicted, v.inputs, [o.name for o in v.outputs],
-                                  [o.units for o in v.outputs], list(residual.loop.fit.model.inputs), out / rel,
-                                  title=f"{case.name}: verification after the residual loop, {label}",
-                                  tic=[o.tic for o in v.outputs])
+                _write_svg(time_history_chart(v.t_s, v.measured, v.predicted, v.inputs, [o.name for o in v.outputs],
+                                              [o.units for o in v.outputs], list(residual.loop.fit.model.inputs),
+                                              title=f"{case.name}: verification after the residual loop, {label}",
+                                              tic=[o.tic for o in v.outputs]), out / rel)
             after.append({"label": label, "j_rms": finite_or_none(v.j_rms), "plot": rel,
                           "tic": {o.name: finite_or_none(o.tic) for o in v.outputs}})
         report["residual_loop"]["verification_final"] = after
@@ -255,23 +257,23 @@ def _inputs(case, stage) -> list[dict]:
 
 
 def _remove_stale_plots(out: Path, written: set[str]) -> None:
-    """Delete ``plots/*.png`` this report did not write (left by an earlier run into the same folder)."""
-    for f in (out / "plots").glob("*.png"):
-        if f.stem not in written:
+    """Delete plots this report did not write: an earlier run's into the same folder, and any PNG
+    (earlier livesweep versions drew the report's plots as PNGs)."""
+    for f in (out / "plots").iterdir() if (out / "plots").is_dir() else ():
+        if f.suffix in (".svg", ".png") and (f.suffix == ".png" or f.stem not in written):
             f.unlink(missing_ok=True)
 
 
 def _residual_section(case, loop, out: Path, taken: set[str], draw: bool = True) -> dict:
     from livesweep.report.case_file import write_augmented_case
-    from livesweep.report.plots import residual_plot
 
     d = loop.to_dict()
     for k, (step, sd) in enumerate(zip(loop.steps, d["steps"])):
         rel = _plot_rel(f"residual_step_{k + 1}", taken) if draw else None
         what = (f"added {step.effect['kind']} at {step.effect['where']}" if step.effect else "nothing added")
         if draw:
-            residual_plot(step.residuals_before, step.residuals_after, out / rel,
-                          title=f"{case.name}: residual loop step {k + 1} ({what})")
+            _write_svg(residual_chart(step.residuals_before, step.residuals_after,
+                                      title=f"{case.name}: residual loop step {k + 1} ({what})"), out / rel)
         sd["plot"] = rel
         sd["residuals_before"] = [r.to_dict() for r in step.residuals_before]
         sd["residuals_after"] = [r.to_dict() for r in step.residuals_after]
@@ -285,14 +287,13 @@ def _residual_section(case, loop, out: Path, taken: set[str], draw: bool = True)
 
 
 def _embed_images(page: str, out: Path) -> str:
-    """Make the page self-contained: every ``src="plots/..png"`` becomes a base64 data URI."""
+    """Make the page self-contained: every ``src="plots/...svg"`` becomes a base64 data URI."""
     import base64
-    import re
 
     def data_uri(m):
         path = out / html.unescape(m.group(1))
         if not path.is_file():
             return m.group(0)
-        return 'src="data:image/png;base64,' + base64.b64encode(path.read_bytes()).decode() + '"'
+        return 'src="data:image/svg+xml;base64,' + base64.b64encode(path.read_bytes()).decode() + '"'
 
-    return re.sub(r'src="(plots/[^"]+\.png)"', data_uri, page)
+    return re.sub(r'src="(plots/[^"]+\.svg)"', data_uri, page)
