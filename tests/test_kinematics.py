@@ -189,3 +189,23 @@ def test_check_input_errors_name_signal_and_value():
         check_angle_against_rate(x[:100], x[:100], 50.0, angle_name="theta", rate_name="q")
     with pytest.raises(ConfigError, match="no content in the band"):
         check_angle_against_rate(x, x, 50.0)
+
+
+@pytest.mark.parametrize("band", [(0.3, 10.0), (1.0, 20.0), (0.5, 5.0)])
+def test_zero_phase_bandpass_is_scipy_forward_backward_butterworth_away_from_the_ends(band):
+    """The check's band-pass is applied as |H|^2 of scipy's butter(2, band, "bandpass") in the
+    frequency domain: away from the ends it must equal sosfiltfilt of the same design."""
+    import math
+
+    import scipy.signal as sg
+
+    from livesweep.consistency.kinematics import zero_phase_bandpass
+
+    fs = 50.0
+    rng = np.random.default_rng(11)
+    x = np.cumsum(rng.standard_normal(20_000)) * 0.1 + np.sin(np.arange(20_000) / fs * 2.0)
+    x = sg.detrend(x)
+    ref = sg.sosfiltfilt(sg.butter(2, list(band), btype="bandpass", output="sos", fs=2 * math.pi * fs), x)
+    got = zero_phase_bandpass(x, band, fs)
+    edge = int(4 * 2 * math.pi / band[0] * fs)          # four periods of the low band edge
+    assert np.max(np.abs(got - ref)[edge:-edge]) < 1e-5 * np.ptp(ref)

@@ -436,3 +436,16 @@ def test_a_sharp_mode_and_an_actuator_lag_together_are_found_as_a_pair():
             cr = (fixed[p["name"]] if p["fixed"] else p)["cramer_rao_pct"] / 100 * abs(p["value"])
             assert abs(p["value"] - truth[p["name"]]) <= 3 * cr, (p, truth[p["name"]])
     assert loop.fit.cost_average <= 0.5 * loop.steps[0].cost_before
+
+
+def test_f_quantile_matches_scipy_stats():
+    """The F-test's critical value comes from the incomplete beta function (scipy.stats is slow to
+    import): it must be scipy.stats.f.isf over the levels and degrees of freedom the loop uses."""
+    from scipy import stats
+
+    from livesweep.ident.selection import f_isf
+
+    for k in (1, 2, 3, 6):
+        for dof in (2, 10, 80, 600, 5000):
+            for level in (0.2, 0.01, 1e-4, 1e-8):
+                assert math.isclose(f_isf(level, k, dof), stats.f.isf(level, k, dof), rel_tol=1e-6)
