@@ -113,6 +113,26 @@ def test_identify_matches_the_command_line_report(cruise_identification, tmp_pat
     assert ident.model is ident.state_space.fit or ident.residual.loop.added
 
 
+def _fails(x):
+    raise ConfigError(f"bad {x}")
+
+
+def test_a_stage_run_in_a_forked_child_returns_its_value_or_raises_its_error():
+    """identify() fits the transfer functions in a child process while the state-space stages run;
+    the child's value and its one-line errors must come back as if it had run here."""
+    import os
+    import threading
+
+    from livesweep.pipeline.identify import _Background
+
+    forks = (os.cpu_count() or 1) >= 2 and threading.active_count() == 1
+    pid = _Background(os.getpid).result()
+    assert (pid != os.getpid()) == forks
+    assert _Background(os.getpid, fork=False).result() == os.getpid()
+    with pytest.raises(ConfigError, match="bad 7"):
+        _Background(_fails, 7).result()
+
+
 def test_identify_refuses_an_unknown_stage():
     with pytest.raises(ConfigError, match="until = 'fit'"):
         livesweep.identify(ROOT / "config" / "xv15_cruise_lateral.toml", until="fit")
@@ -121,10 +141,12 @@ def test_identify_refuses_an_unknown_stage():
 def test_rerun_into_the_same_folder_leaves_no_stale_plots(cruise_identification, tmp_path):
     out = tmp_path / "r"
     livesweep.write_report(cruise_identification, out)
-    n = len(list((out / "plots").glob("*.png")))
-    (out / "plots" / "old_pair.png").write_bytes(b"\x89PNG")
+    n = len(list((out / "plots").glob("*.svg")))
+    (out / "plots" / "old_pair.svg").write_text("<svg/>")
+    (out / "plots" / "p_da.png").write_bytes(b"\x89PNG")               # a plot of an older version
     livesweep.write_report(cruise_identification, out)
-    assert len(list((out / "plots").glob("*.png"))) == n and not (out / "plots" / "old_pair.png").exists()
+    assert len(list((out / "plots").glob("*.svg"))) == n and not (out / "plots" / "old_pair.svg").exists()
+    assert not list((out / "plots").glob("*.png"))
 
 
 def test_frequency_response_from_arrays_checks_shapes_and_hands_out_read_only_arrays():

@@ -122,7 +122,7 @@ class Identification:
 
 
 def identify(case: Case | str | Path, *, until: str = "residual-loop",
-             progress: Callable[[str], None] | None = None) -> Identification:
+             progress: Callable[[str], None] | None = None, parallel: bool = True) -> Identification:
     """Run the identify stages of a case file and return what they computed.
 
     Stages run in the order of :data:`STAGES` up to ``until``; each runs only when the case
@@ -137,6 +137,11 @@ def identify(case: Case | str | Path, *, until: str = "residual-loop",
         The last stage to run, one of :data:`STAGES`.
     progress : callable, optional
         Called with one line of text as each stage starts.
+    parallel : bool
+        Fit the transfer functions in a forked child process while this one runs the state-space,
+        verification and residual stages (both need only the frequency responses). Used when the
+        platform can fork and has a second core; results are the same either way. ``livesweep
+        batch`` turns it off (it already runs one case per core).
 
     Returns
     -------
@@ -161,9 +166,13 @@ def identify(case: Case | str | Path, *, until: str = "residual-loop",
     best = fr.analysis.best
     ran = ["frequency-response"]
     tf = ss = ver = res = None
+    pending = None
     if last >= 1 and specs.transfer_functions:
         say(f"transfer functions: {', '.join(t.model.name for t in specs.transfer_functions)}")
-        tf = run_transfer_function_stage(case, best, specs.transfer_functions)
+        overlap = parallel and last >= 2 and specs.state_space is not None
+        pending = _Background(run_transfer_function_stage, case, best, specs.transfer_functions, fork=overlap)
+        if not overlap:
+            tf = pending.result()
         ran.append("transfer-functions")
     if last >= 2 and specs.state_space is not None:
         ss = run_state_space_stage(case, best, progress=say, model=specs.state_space)
@@ -178,4 +187,50 @@ def identify(case: Case | str | Path, *, until: str = "residual-loop",
                                  settings=specs.residual)
         if res is not None:
             ran.append("residual-loop")
+    if pending is not None:
+        tf = pending.result()
     return Identification(case, fr, tf, ss, ver, res, specs, tuple(ran), time.monotonic() - t0)
+
+
+class _Background:
+    """``fn(*args)`` in a forked child process when ``fork`` and the machine allow, else right here.
+
+    It forks only from a single-threaded process with a second core: a child forked while other
+    threads hold locks (a notebook kernel, a Zenoh session) can deadlock, so there the call runs
+    here. :meth:`result` returns the value or raises the exception; a child that dies without an
+    answer (killed, out of memory) is not waited on forever: the call then runs here instead.
+    """
+
+    def __init__(self, fn, *args, fork: bool = True):
+        import multiprocessing
+        import os
+        import threading
+
+        self._call, self._pool, self._future = (fn, args), None, None
+        if (fork and (os.cpu_count() or 1) >= 2 and threading.active_count() == 1
+                and "fork" in multiprocessing.get_all_start_methods()):
+            from concurrent.futures import ProcessPoolExecutor
+
+            try:
+                self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork"))
+                self._future = self._pool.submit(fn, *args)
+            except (OSError, RuntimeError):        # no processes left, or not allowed here
+                self._close()
+
+    def result(self):
+        from concurrent.futures.process import BrokenProcessPool
+
+        if self._future is not None:
+            try:
+                return self._future.result()
+            except BrokenProcessPool:
+                pass
+            finally:
+                self._close()
+        fn, args = self._call
+        return fn(*args)
+
+    def _close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+        self._pool, self._future = None, None
