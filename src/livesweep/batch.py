@@ -344,7 +344,7 @@ def run_one(case_path, out_dir, stage: str = _DEFAULT_STAGE, folder: str | None 
                 def progress(msg):
                     log.write(f"[{time.monotonic() - t0:6.1f} s] {msg}\n")
 
-                ident = identify(case_path, until=stage, progress=progress)
+                ident = identify(case_path, until=stage, progress=progress, parallel=False)   # a case per core already
                 progress("writing the report" + ("" if plots else " (no plots)"))
                 path = write_report(ident, case_dir, plots=plots)
                 log.write("\n".join(summary_lines(ident)) + f"\nwrote {path} and {path.parent / 'report.html'}\n")
