@@ -49,11 +49,10 @@ def write_responses_csv(frs, path, units: dict) -> Path:
                 "random_error", "output_units", "input_units"])
     for pair in frs.pairs():
         ou, iu = units.get(pair.output, ""), units.get(pair.input, "")
-        for k in range(pair.omega.size):
-            H = complex(pair.H[k])
-            w.writerow([pair.output, pair.input, _cell(pair.omega[k]), _cell(pair.magnitude_db[k]),
-                        _cell(pair.phase_deg[k]), _cell(H.real), _cell(H.imag), _cell(pair.coherence[k]),
-                        _cell(pair.random_error[k]), ou, iu])
+        cols = [np.asarray(c, float).tolist() for c in (pair.omega, pair.magnitude_db, pair.phase_deg, pair.H.real,
+                                                         pair.H.imag, pair.coherence, pair.random_error)]
+        for row in zip(*cols):      # magnitude and phase computed once per pair, not once per row
+            w.writerow([pair.output, pair.input, *map(_cell, row), ou, iu])
     path = Path(path)
     path.write_text(buf.getvalue())
     return path
