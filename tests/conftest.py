@@ -19,6 +19,28 @@ SLOW_MODULES = {
 }
 
 
+_CACHE_DIR = None
+
+
+def pytest_configure(config):
+    """The decoded-log cache of this run lives in a fresh folder, never the user's ~/.cache (the CLI
+    subprocesses the tests start inherit it)."""
+    global _CACHE_DIR
+    import os
+    import tempfile
+
+    if "LIVESWEEP_CACHE_DIR" not in os.environ:
+        _CACHE_DIR = tempfile.mkdtemp(prefix="livesweep-test-cache-")
+        os.environ["LIVESWEEP_CACHE_DIR"] = _CACHE_DIR
+
+
+def pytest_unconfigure(config):
+    import shutil
+
+    if _CACHE_DIR is not None:
+        shutil.rmtree(_CACHE_DIR, ignore_errors=True)
+
+
 def pytest_collection_modifyitems(config, items):
     slow = pytest.mark.slow
     for item in items:

@@ -22,6 +22,7 @@ import numpy as np
 
 from livesweep.config import RecordSpec, SignalSpec
 from livesweep.errors import ConfigError, LogFormatError
+from livesweep.telemetry.decoded_cache import cached_columns
 from livesweep.telemetry.extract import SignalExtractor, compile_signal
 from livesweep.telemetry.mcap_log import read_topics_fields
 
@@ -68,17 +69,23 @@ def _group_by_topic(extractors: Iterable[SignalExtractor]) -> dict[str, list[Sig
 
 def _read_topics(log: Path, groups: Mapping[str, list[SignalExtractor]],
                  notes: list[str] | None) -> dict[str, dict[str, np.ndarray]]:
-    """Every field (operands, stamps, selection) of every topic the signals need, in one pass over the log."""
+    """Every field (operands, stamps, selection) of every topic the signals need, in one pass over the
+    log, or from the decoded-column cache when the log's bytes were decoded before
+    (:mod:`livesweep.telemetry.decoded_cache`)."""
     requests: dict[str, list[str]] = {}
     for topic, extractors in groups.items():
         fields = requests.setdefault(topic, [])
         for ex in extractors:
             fields.extend(f for f in ex.read_fields if f not in fields)
     try:
-        return read_topics_fields(log, requests, time="log", notes=notes)
+        got = cached_columns(log, requests, lambda n: read_topics_fields(log, requests, time="log", notes=n),
+                             time="log", missing="error")
     except LogFormatError as e:
         names = ", ".join(ex.spec.name for exs in groups.values() for ex in exs)
         raise LogFormatError(f"signal(s) {names}: {e}") from e
+    if notes is not None:
+        notes.extend(got["notes"])
+    return got["columns"]
 
 
 def _stamp_seconds(spec: SignalSpec, cols: Mapping[str, np.ndarray]) -> np.ndarray:
