@@ -27,6 +27,7 @@ from livesweep.limits import MAX_RECORD_VALUES
 from livesweep.spectral.adequacy import (PULSE_LIKE_SLOPE_DB_PER_DECADE, input_power_slope_db_per_decade,
                                          pair_adequacy)
 from livesweep.spectral.analysis import SpectralAnalysis, analyze
+from livesweep.pipeline.background import Background
 from livesweep.telemetry.signals import read_signals
 
 __all__ = ["FrequencyResponseStage", "load_record", "run_frequency_response_stage", "KINEMATIC_PAIRS"]
@@ -72,8 +73,21 @@ def _grid_values(raw: dict, sample_rate_hz: float) -> tuple[int, float, float]:
     return int((hi - lo) * sample_rate_hz + 1) * len(raw), lo, hi
 
 
+def _read(rec: RecordSpec, signals, names: list[str]) -> tuple[dict, list[str]]:
+    notes: list[str] = []
+    return read_signals(rec, signals, names, notes=notes), notes
+
+
+def _read_only(raw: dict) -> dict:
+    """Signals that came back from a child process (unpickled arrays are writable) made read-only again."""
+    for s in raw.values():
+        s.t_s.setflags(write=False)
+        s.values.setflags(write=False)
+    return raw
+
+
 def load_record(case: Case, records: tuple[RecordSpec, ...], names: list[str], sample_rate_hz: float, *,
-                notes: list[str] | None = None) -> UniformRecord:
+                notes: list[str] | None = None, parallel: bool = False) -> UniformRecord:
     """Read ``names`` from every record, resample each onto ``sample_rate_hz`` and concatenate them.
 
     Parameters
@@ -86,6 +100,9 @@ def load_record(case: Case, records: tuple[RecordSpec, ...], names: list[str], s
         Grid rate [Hz].
     notes : list of str, optional
         Receives a note per log that was unfinished (read up to its torn end) or recovered.
+    parallel : bool
+        Read the next log in a forked child while this one is read
+        (:class:`~livesweep.pipeline.background.Background`); the result is the same.
 
     Raises
     ------
@@ -95,8 +112,15 @@ def load_record(case: Case, records: tuple[RecordSpec, ...], names: list[str], s
         anything is resampled.
     """
     parts, total = [], 0
-    for rec in records:
-        raw = read_signals(rec, case.signals, names, notes=notes)
+    ahead = None
+    for k, rec in enumerate(records):
+        following = (Background(_read, records[k + 1], case.signals, names)       # read while this one is
+                     if parallel and k + 1 < len(records) else None)
+        raw, said = ahead.result() if ahead is not None else _read(rec, case.signals, names)
+        raw = _read_only(raw)
+        ahead = following
+        if notes is not None:
+            notes.extend(said)
         size, lo, hi = _grid_values(raw, sample_rate_hz)
         total += size
         if total > MAX_RECORD_VALUES:
@@ -190,8 +214,9 @@ def _kinematic_checks(case: Case, record: UniformRecord):
     return checks
 
 
-def run_frequency_response_stage(case: Case) -> FrequencyResponseStage:
-    """Run the stage for a loaded case (see module docstring)."""
+def run_frequency_response_stage(case: Case, *, parallel: bool = False) -> FrequencyResponseStage:
+    """Run the stage for a loaded case (see module docstring); ``parallel``: read the logs two at a
+    time in forked children (:func:`load_record`)."""
     sp = case.spectral
     if sp is None:
         raise ConfigError(f"{case.path}: the case has no [spectral] table; the frequency-response stage needs one")
@@ -199,7 +224,7 @@ def run_frequency_response_stage(case: Case) -> FrequencyResponseStage:
     names = list(dict.fromkeys([*sp.inputs, *sp.outputs, *refs, *(n for pair in KINEMATIC_PAIRS for n in pair
                                                                    if n in case.signals)]))
     notes: list[str] = []
-    raw = load_record(case, case.identify, names, sp.sample_rate_hz, notes=notes)
+    raw = load_record(case, case.identify, names, sp.sample_rate_hz, notes=notes, parallel=parallel)
     record, wild, bias = _repair(raw)
     checks = _kinematic_checks(case, record)
     used = list(dict.fromkeys([*sp.inputs, *sp.outputs, *refs]))

@@ -20,6 +20,7 @@ from typing import Callable
 from livesweep.config import Case, load_case
 from livesweep.errors import ConfigError
 from livesweep.pipeline import STAGES
+from livesweep.pipeline.background import Background
 from livesweep.pipeline.frequency_response import FrequencyResponseStage, run_frequency_response_stage
 from livesweep.pipeline.parametric import (StateSpaceStage, TransferFunctionStage, VerificationStage,
                                            run_state_space_stage, run_transfer_function_stage,
@@ -162,7 +163,7 @@ def identify(case: Case | str | Path, *, until: str = "residual-loop",
     last = STAGES.index(until)
     t0 = time.monotonic()
     say(f"{case.name}: frequency responses from {len(case.identify)} record(s)")
-    fr = run_frequency_response_stage(case)
+    fr = run_frequency_response_stage(case, parallel=parallel)
     best = fr.analysis.best
     ran = ["frequency-response"]
     tf = ss = ver = res = None
@@ -170,7 +171,7 @@ def identify(case: Case | str | Path, *, until: str = "residual-loop",
     if last >= 1 and specs.transfer_functions:
         say(f"transfer functions: {', '.join(t.model.name for t in specs.transfer_functions)}")
         overlap = parallel and last >= 2 and specs.state_space is not None
-        pending = _Background(run_transfer_function_stage, case, best, specs.transfer_functions, fork=overlap)
+        pending = Background(run_transfer_function_stage, case, best, specs.transfer_functions, fork=overlap)
         if not overlap:
             tf = pending.result()
         ran.append("transfer-functions")
@@ -191,46 +192,3 @@ def identify(case: Case | str | Path, *, until: str = "residual-loop",
         tf = pending.result()
     return Identification(case, fr, tf, ss, ver, res, specs, tuple(ran), time.monotonic() - t0)
 
-
-class _Background:
-    """``fn(*args)`` in a forked child process when ``fork`` and the machine allow, else right here.
-
-    It forks only from a single-threaded process with a second core: a child forked while other
-    threads hold locks (a notebook kernel, a Zenoh session) can deadlock, so there the call runs
-    here. :meth:`result` returns the value or raises the exception; a child that dies without an
-    answer (killed, out of memory) is not waited on forever: the call then runs here instead.
-    """
-
-    def __init__(self, fn, *args, fork: bool = True):
-        import multiprocessing
-        import os
-        import threading
-
-        self._call, self._pool, self._future = (fn, args), None, None
-        if (fork and (os.cpu_count() or 1) >= 2 and threading.active_count() == 1
-                and "fork" in multiprocessing.get_all_start_methods()):
-            from concurrent.futures import ProcessPoolExecutor
-
-            try:
-                self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork"))
-                self._future = self._pool.submit(fn, *args)
-            except (OSError, RuntimeError):        # no processes left, or not allowed here
-                self._close()
-
-    def result(self):
-        from concurrent.futures.process import BrokenProcessPool
-
-        if self._future is not None:
-            try:
-                return self._future.result()
-            except BrokenProcessPool:
-                pass
-            finally:
-                self._close()
-        fn, args = self._call
-        return fn(*args)
-
-    def _close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=False, cancel_futures=True)
-        self._pool, self._future = None, None
