@@ -821,11 +821,13 @@ _BLAS_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if args.verb in _SMALL_BLAS_VERBS and "numpy" not in sys.modules:      # only takes effect before numpy loads
+    argv = sys.argv[1:] if argv is None else list(argv)
+    verb = next((a for a in argv if not a.startswith("-")), None)
+    if verb in _SMALL_BLAS_VERBS and "numpy" not in sys.modules:   # before anything loads numpy (the parser does)
         for var in _BLAS_THREAD_VARS:
             os.environ.setdefault(var, "1")
+    parser = build_parser()
+    args = parser.parse_args(argv)
     if getattr(args, "axis", None) is None and args.verb == "sim":
         args.axis = [_default_axis(args.model)]
     try:
