@@ -565,11 +565,19 @@ class StateSpaceModel:
         d = self._derivatives(theta)
         Yl = np.swapaxes(np.linalg.solve(np.swapaxes(A, 1, 2), np.broadcast_to(H.T, (omega.size,) + H.T.shape)), 1, 2)
         # dA X = (s dM - dF) X ;  dT0 = dH X + Yl (dG - dA X) + dJ
-        # batched matrix products (BLAS), not einsum: this is the inner loop of every fit
-        dFX = np.matmul(d["F"][:, None], X[None])                         # (k, f, n, m)
-        dMX = np.matmul(d["M"][:, None], X[None])
-        inner = d["G"][:, None] + dFX - s[None, :, None, None] * dMX      # (k, f, n, m)
-        dT0 = np.matmul(d["H"][:, None], X[None]) + np.matmul(Yl[None], inner) + d["J"][:, None]
+        # this is the inner loop of every fit: each product is one BLAS call over all parameters and
+        # frequencies (k x f small matmuls cost 4x more)
+        k, n = d["F"].shape[:2]
+        f, _, m = X.shape
+        p = H.shape[0]
+        Xt = np.moveaxis(X, 0, 1).reshape(n, f * m)                                   # (n, f m)
+        dFX = (d["F"].reshape(k * n, n) @ Xt).reshape(k, n, f, m)
+        dMX = (d["M"].reshape(k * n, n) @ Xt).reshape(k, n, f, m)
+        dHX = (d["H"].reshape(k * p, n) @ Xt).reshape(k, p, f, m)
+        inner = d["G"][:, :, None, :] + dFX - s[None, None, :, None] * dMX             # (k, n, f, m)
+        inner = inner.transpose(2, 1, 0, 3).reshape(f, n, k * m)                        # (f, n, k m)
+        YI = (Yl @ inner).reshape(f, p, k, m).transpose(2, 0, 1, 3)                      # (k, f, p, m)
+        dT0 = np.swapaxes(dHX, 1, 2) + YI + d["J"][:, None]                              # (k, f, p, m)
         dtau = d["tau"][:, 0, :] - d["tau_s"][:, 0, :]                     # (k, m), net input delay
         dtau_y = d["tau_y"][:, 0, :]                                       # (k, p)
         dT = dT0 * E2[None] + T[None] * (-s[None, :, None, None] * (dtau[:, None, None, :] + dtau_y[:, None, :, None]))
