@@ -364,7 +364,7 @@ modes are shown, not flagged: many airframes are unstable without their flight c
 
 
 def render(report: dict) -> str:
-    """The HTML of a ``report.json`` dictionary (plots referenced as ``plots/*.png``)."""
+    """The HTML of a ``report.json`` dictionary (plots referenced as ``plots/*.svg``)."""
     summary = stage_summary(report)
     toc = ("<p class='noprint'><a href='#summary'>summary</a> · <a href='#data'>data quality</a> · "
            "<a href='#responses'>frequency responses</a>" + (" · <a href='#tf'>transfer functions</a>"
