@@ -291,11 +291,12 @@ def test_crafted_json_on_zenoh_neither_stops_the_monitor_nor_its_replay(tmp_path
     try:
         time.sleep(0.5)
         for k in range(len(t)):
-            pub.put("uav/imu", json.dumps({"t": float(t[k]), "u": float(u[k]), "y": float(0.5 * u[k])}))
+            pub.put("uav/imu", json.dumps({"t": float(t[k]), "u": float(u[k]), "y": float(0.5 * u[k])}),
+                    congestion_control=zenoh.CongestionControl.BLOCK)     # the default DROP loses samples under load
             sent += 1
             if k % 300 == 150:
                 for c in crafted(float(t[k])):
-                    pub.put("uav/imu", c)
+                    pub.put("uav/imu", c, congestion_control=zenoh.CongestionControl.BLOCK)
         deadline = time.monotonic() + 20
         pipe.run(stop=lambda: pipe.totals.frames >= sent + 2 or time.monotonic() > deadline)
     finally:
