@@ -3,7 +3,6 @@ where the data came from and what the conversion had to skip or repair."""
 
 from __future__ import annotations
 
-import hashlib
 import json
 import struct
 from dataclasses import asdict, dataclass, field
@@ -11,6 +10,7 @@ from pathlib import Path
 
 from livesweep import __version__
 from livesweep.errors import ConfigError, LogFormatError
+from livesweep.hashing import sha256_of  # re-exported: converters and callers import it from here
 from livesweep.telemetry.mcap_log import McapLogWriter
 
 __all__ = ["ConversionResult", "ConversionWriter", "sniff_format", "sha256_of", "refuse_options", "MAX_BOOT_US",
@@ -39,14 +39,6 @@ def refuse_options(src, what: str, options: dict, known: str) -> None:
     """ConfigError naming the file when a converter is given options it does not take."""
     if options:
         raise ConfigError(f"{src}: option(s) {', '.join(sorted(options))} do not apply to {what} (it takes {known})")
-
-
-def sha256_of(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _plausible_tlog(head: bytes) -> bool:

@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from livesweep.hashing import sha256_of
+
 __all__ = ["cache_dir", "cached_columns"]
 
 _FORMAT = "livesweep.decoded/1"
@@ -51,12 +53,9 @@ def _limit_bytes() -> int:
 
 
 def _key(path: Path, requests: Mapping[str, list[str]], options: Mapping[str, str]) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    h.update(json.dumps([_FORMAT, sorted((t, list(f)) for t, f in requests.items()), sorted(options.items())]).encode())
-    return h.hexdigest()
+    """The log's content hash (always read again: a cache must never serve a changed file) and the request."""
+    what = [_FORMAT, sha256_of(path), sorted((t, list(f)) for t, f in requests.items()), sorted(options.items())]
+    return hashlib.sha256(json.dumps(what).encode()).hexdigest()
 
 
 def _load(entry: Path, requests: Mapping[str, list[str]]):
