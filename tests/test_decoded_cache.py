@@ -111,3 +111,14 @@ def test_the_cache_keeps_to_its_size_by_dropping_the_least_recently_used(cache, 
     _read(logs[2])
     left = list(cache.glob("*.npz"))
     assert len(left) == 2 and first not in left
+
+
+@pytest.mark.parametrize("bad", ["lots", "-5", "nan"])
+def test_a_bad_size_setting_is_named(cache, tmp_path, monkeypatch, bad):
+    from livesweep.errors import ConfigError
+
+    log = tmp_path / "v.mcap"
+    log.write_bytes((ROOT / "replay_logs" / "xv15_cruise_verify.mcap").read_bytes())
+    monkeypatch.setenv("LIVESWEEP_CACHE_MB", bad)
+    with pytest.raises(ConfigError, match=f"LIVESWEEP_CACHE_MB = '{bad}': must be a number of megabytes"):
+        _read(log)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import tempfile
 from collections.abc import Callable, Mapping
@@ -26,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from livesweep.errors import ConfigError
 from livesweep.hashing import sha256_of
 
 __all__ = ["cache_dir", "cached_columns"]
@@ -46,10 +48,16 @@ def cache_dir() -> Path | None:
 
 
 def _limit_bytes() -> int:
+    """``LIVESWEEP_CACHE_MB`` in bytes; ConfigError naming the variable and its value when it is not a
+    number of megabytes >= 0."""
+    text = os.environ.get("LIVESWEEP_CACHE_MB", "512")
     try:
-        return int(float(os.environ.get("LIVESWEEP_CACHE_MB", "512")) * 1e6)
+        mb = float(text)
     except ValueError:
-        return int(512e6)
+        mb = math.nan
+    if not (math.isfinite(mb) and mb >= 0):
+        raise ConfigError(f"LIVESWEEP_CACHE_MB = {text!r}: must be a number of megabytes >= 0 (default 512)")
+    return int(mb * 1e6)
 
 
 def _key(path: Path, requests: Mapping[str, list[str]], options: Mapping[str, str]) -> str:
@@ -65,7 +73,7 @@ def _load(entry: Path, requests: Mapping[str, list[str]]):
     return out, notes
 
 
-def _store(folder: Path, entry: Path, result, notes: list[str]) -> None:
+def _store(folder: Path, entry: Path, result, notes: list[str], limit: int) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     arrays = {t + _SEP + f: a for t, cols in result.items() for f, a in cols.items()}
     arrays[_NOTES] = np.array(notes, dtype=str)
@@ -77,7 +85,7 @@ def _store(folder: Path, entry: Path, result, notes: list[str]) -> None:
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
-    _prune(folder, _limit_bytes())
+    _prune(folder, limit)
 
 
 def _prune(folder: Path, limit: int) -> None:
@@ -116,6 +124,7 @@ def cached_columns(path, requests: Mapping[str, list[str]], read: Callable[[list
         ``{"columns": {topic: {field: array}}, "notes": [str], "cached": bool}``.
     """
     folder = cache_dir()
+    limit = _limit_bytes() if folder is not None else 0        # a bad setting is named before any work
     path = Path(path)
     entry = None
     if folder is not None:
@@ -131,7 +140,7 @@ def cached_columns(path, requests: Mapping[str, list[str]], read: Callable[[list
     columns = read(notes)
     if entry is not None:
         try:
-            _store(folder, entry, columns, notes)
+            _store(folder, entry, columns, notes, limit)
         except (OSError, ValueError):
             pass
     return {"columns": columns, "notes": notes, "cached": False}
