@@ -71,9 +71,9 @@ def main() -> int:
                 times["baseline"].append(_run(base / "src", base, tmp / "out_base", env))
             times["cold"].append(_run(ROOT / "src", ROOT, tmp / "out_cold",
                                       {**env, "LIVESWEEP_CACHE_DIR": str(tmp / f"cache_cold_{k}")}))
-            times["warm"].append(_run(ROOT / "src", ROOT, tmp / "out_warm", {**env, "LIVESWEEP_CACHE_DIR": str(warm_cache)}))
-            times["warm, --no-plots"].append(_run(ROOT / "src", ROOT, tmp / "out_np",
-                                                  {**env, "LIVESWEEP_CACHE_DIR": str(warm_cache)}, "--no-plots"))
+            warm = {**env, "LIVESWEEP_CACHE_DIR": str(warm_cache)}
+            times["warm"].append(_run(ROOT / "src", ROOT, tmp / "out_warm", warm))
+            times["warm, --no-plots"].append(_run(ROOT / "src", ROOT, tmp / "out_np", warm, "--no-plots"))
         print(f"livesweep identify {CASE} (every stage, report), {args.rounds} rounds, {os.cpu_count()} CPUs; "
               "median [min-max] wall time of a fresh process")
         ref = statistics.median(times["baseline"]) if times["baseline"] else None

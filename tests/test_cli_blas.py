@@ -28,7 +28,8 @@ print("BLAS threads at numpy import:", seen.get("v"), "exit", code)
 def _probe(tmp_path, *args, env_extra=None):
     import os
 
-    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+    blas = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+    env = {k: v for k, v in os.environ.items() if k not in blas}
     env.update(env_extra or {})
     r = subprocess.run([sys.executable, "-c", _PROBE, *args], capture_output=True, text=True, env=env, timeout=300)
     return r.stdout.strip().splitlines()[-1] if r.stdout.strip() else r.stderr
@@ -36,14 +37,13 @@ def _probe(tmp_path, *args, env_extra=None):
 
 def test_identify_loads_numpy_with_single_threaded_blas(tmp_path):
     case = str(ROOT / "config" / "xv15_cruise_lateral.toml")
-    got = _probe(tmp_path, "identify", case, "--out", str(tmp_path / "o"), "--stage", "frequency-response", "--no-plots")
-    assert got == "BLAS threads at numpy import: 1 exit 0"
+    args = ("identify", case, "--out", str(tmp_path / "o"), "--stage", "frequency-response", "--no-plots")
+    assert _probe(tmp_path, *args) == "BLAS threads at numpy import: 1 exit 0"
 
 
 def test_a_users_own_blas_setting_is_kept_and_other_verbs_are_left_alone(tmp_path):
     case = str(ROOT / "config" / "xv15_cruise_lateral.toml")
-    got = _probe(tmp_path, "identify", case, "--out", str(tmp_path / "o"), "--stage", "frequency-response", "--no-plots",
-                 env_extra={"OPENBLAS_NUM_THREADS": "2"})
-    assert got == "BLAS threads at numpy import: 2 exit 0"
+    args = ("identify", case, "--out", str(tmp_path / "o"), "--stage", "frequency-response", "--no-plots")
+    assert _probe(tmp_path, *args, env_extra={"OPENBLAS_NUM_THREADS": "2"}) == "BLAS threads at numpy import: 2 exit 0"
     got = _probe(tmp_path, "maps")
     assert got.startswith("BLAS threads at numpy import: None")

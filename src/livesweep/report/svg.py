@@ -70,11 +70,17 @@ def log_ticks(lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _fmt_tick(v: float, step: float | None = None) -> str:
-    if step is None:                  # a log axis: 0.01, 0.2, 1, 20, 100
+    """A tick label: ``%g`` on a log axis (0.01, 0.2, 1, 20), else as many decimals as ``step`` needs."""
+    if step is None:
         return f"{v:g}"
-    decimals = max(0, -math.floor(math.log10(step) + 1e-9)) + (1 if abs(step / 10.0 ** math.floor(math.log10(step)) - 2.5) < 1e-9 else 0)
+    power = math.floor(math.log10(step) + 1e-9)
+    decimals = max(0, -power) + (1 if abs(step / 10.0 ** power - 2.5) < 1e-9 else 0)     # 0.25 steps
     s = f"{v:.{decimals}f}"
     return "0" if float(s) == 0 else s.replace("-", "−")
+
+
+def _grid_line(x1: float, y1: float, x2: float, y2: float, color: str = GRID) -> str:
+    return f'<line x1="{x1:.1f}" y1="{y1:.1f}" x2="{x2:.1f}" y2="{y2:.1f}" stroke="{color}" stroke-width="0.4"/>'
 
 
 class _Scale:
@@ -167,7 +173,7 @@ def _panel(out: list, p: Panel, box: tuple, xr: tuple, uid: str) -> None:
         major, minor = log_ticks(*xr)
         for v in minor:
             X = float(sx(v))
-            out.append(f'<line x1="{X:.1f}" y1="{y0:.1f}" x2="{X:.1f}" y2="{y0 + h:.1f}" stroke="{MINOR_GRID}" stroke-width="0.4"/>')
+            out.append(_grid_line(X, y0, X, y0 + h, MINOR_GRID))
         x_labels = [(v, _fmt_tick(v)) for v in major]
     else:
         ticks = linear_ticks(*xr, target=9)
@@ -175,7 +181,7 @@ def _panel(out: list, p: Panel, box: tuple, xr: tuple, uid: str) -> None:
         x_labels = [(v, _fmt_tick(v, step)) for v in ticks]
     for v, text in x_labels:
         X = float(sx(v))
-        out.append(f'<line x1="{X:.1f}" y1="{y0:.1f}" x2="{X:.1f}" y2="{y0 + h:.1f}" stroke="{GRID}" stroke-width="0.4"/>')
+        out.append(_grid_line(X, y0, X, y0 + h))
         if p.x_tick_labels:
             out.append(f'<text x="{X:.1f}" y="{y0 + h + TICK_FONT + 3:.1f}" font-size="{TICK_FONT}" '
                        f'text-anchor="middle">{escape(text)}</text>')
@@ -183,7 +189,7 @@ def _panel(out: list, p: Panel, box: tuple, xr: tuple, uid: str) -> None:
     ystep = float(yt[1] - yt[0]) if yt.size > 1 else 1.0
     for v in yt:
         Y = float(sy(v))
-        out.append(f'<line x1="{x0:.1f}" y1="{Y:.1f}" x2="{x0 + w:.1f}" y2="{Y:.1f}" stroke="{GRID}" stroke-width="0.4"/>')
+        out.append(_grid_line(x0, Y, x0 + w, Y))
         out.append(f'<text x="{x0 - 3:.1f}" y="{Y + TICK_FONT * 0.35:.1f}" font-size="{TICK_FONT}" '
                    f'text-anchor="end">{escape(_fmt_tick(v, ystep))}</text>')
     # data, clipped to the axes
