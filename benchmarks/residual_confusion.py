@@ -9,6 +9,7 @@ injected that the airframe's shipped case does not declare; the loop runs on the
     python benchmarks/residual_confusion.py --development # the cases looked at while setting the gates
     python benchmarks/residual_confusion.py               # held-out: effect cases + clean cases
     python benchmarks/residual_confusion.py --held-out-2  # the second held-out set (see HELD_OUT_2)
+    python benchmarks/residual_confusion.py --held-out-3  # the third (see HELD_OUT_3)
     python benchmarks/residual_confusion.py -j 2 --only hover
 
 The calibration set (clean XV-15 cruise, seeds 30-43 at full and half turbulence) is the only
@@ -452,6 +453,97 @@ HELD_OUT_2_CLEAN = ([Case(f"clean cruise seed {s}", "cruise", s) for s in range(
                     + [Case("clean cruise calm air", "cruise", 338, turbulence=0.0),
                        Case("clean cruise full turbulence", "cruise", 339, turbulence=1.0)])
 
+#: A third held-out set, written after the last change to the loop (stop 22) and run once on it:
+#: new seeds (401-449), magnitudes and places, every kind on every airframe, three pairs.
+HELD_OUT_3 = [
+    Case("cruise delay 25 ms da", "cruise", 401, (_e("time_delay", input="da", delay_s=0.025),), {("time_delay", "da")},
+         {"tau_a": TAU_A + 0.025}, (("fix", "tau_a", TAU_A),)),
+    Case("cruise lag 0.1 s da", "cruise", 402, (_e("actuator_lag", input="da", time_constant_s=0.1),),
+         {("actuator_lag", "da")}, {"w_act_da": 10.0}),
+    Case("cruise lag 50 ms dr", "cruise", 403, (_e("actuator_lag", input="dr", time_constant_s=0.05),),
+         {("actuator_lag", "dr")}, {"w_act_dr": 20.0}),
+    Case("cruise 2nd-order 14 rad/s zeta 0.6 da", "cruise", 404,
+         (_e("actuator_second_order", input="da", omega_rad_s=14.0, zeta=0.6),), {("actuator_second_order", "da")},
+         {"wn_act_da": 14.0, "zeta_act_da": 0.6}),
+    Case("cruise notch 7 rad/s depth 0.6 da", "cruise", 405,
+         (_e("notch_filter", input="da", omega_rad_s=7.0, zeta=0.2, depth=0.6),), {("notch_filter", "da")},
+         {"w_notch_da": 7.0, "zeta_notch_da": 0.2, "depth_notch_da": 0.6}),
+    Case("cruise mode r 14 rad/s zeta 0.05/0.2", "cruise", 406,
+         (_e("structural_mode", output="r", omega_rad_s=14.0, zeta_pole=0.05, zeta_zero=0.2),),
+         {("structural_mode", "r")}, {"w_mode_r": 14.0, "zeta_mode_r": 0.05, "zeta_zero_mode_r": 0.2}),
+    Case("cruise mode p 6 rad/s zeta 0.08/0.25", "cruise", 407,
+         (_e("structural_mode", output="p", omega_rad_s=6.0, zeta_pole=0.08, zeta_zero=0.25),),
+         {("structural_mode", "p")}, {"w_mode_p": 6.0, "zeta_mode_p": 0.08, "zeta_zero_mode_p": 0.25}),
+    Case("cruise skew 30 ms p", "cruise", 408, (_e("sensor_skew", output="p", delay_s=0.03),), {("sensor_skew", "p")},
+         {"skew_p": 0.03}),
+    Case("cruise scale 1.25 r", "cruise", 409, (_e("scale_factor", output="r", factor=1.25),),
+         {("scale_factor", "r")}, {"k_r": 1.25}),
+    Case("cruise missing Np", "cruise", 410, (), {("missing_derivative", "F[r][p]")}, {"F_r_p": -0.2308},
+         (("drop", "F", "r", "p", "Np"),)),
+    Case("cruise delay da + skew ay", "cruise", 411,
+         (_e("time_delay", input="da", delay_s=0.04), _e("sensor_skew", output="ay", delay_s=0.04)),
+         {("time_delay", "da"), ("sensor_skew", "ay")}, {"tau_a": TAU_A + 0.04, "skew_ay": 0.04},
+         (("fix", "tau_a", TAU_A),)),
+    Case("cruise input skew 40 ms dr", "cruise", 412, (), {("sensor_skew", "dr")}, {"skew_dr": 0.04},
+         (("fix", "tau_r", TAU_R),), log_late=("dr", 0.04)),
+    Case("hover delay 40 ms da", "hover", 401, (_e("time_delay", input="da", delay_s=0.04),), {("time_delay", "da")},
+         {"tau_da": 0.04}),
+    Case("hover delay 0.12 s dr", "hover", 402, (_e("time_delay", input="dr", delay_s=0.12),), {("time_delay", "dr")},
+         {"tau_dr": 0.12}),
+    Case("hover lag 0.12 s da", "hover", 403, (_e("actuator_lag", input="da", time_constant_s=0.12),),
+         {("actuator_lag", "da")}, {"w_act_da": 1 / 0.12}),
+    Case("hover 2nd-order 6 rad/s zeta 0.7 dr", "hover", 404,
+         (_e("actuator_second_order", input="dr", omega_rad_s=6.0, zeta=0.7),), {("actuator_second_order", "dr")},
+         {"wn_act_dr": 6.0, "zeta_act_dr": 0.7}),
+    Case("hover notch 3 rad/s depth 0.6 dr", "hover", 405,
+         (_e("notch_filter", input="dr", omega_rad_s=3.0, zeta=0.3, depth=0.6),), {("notch_filter", "dr")},
+         {"w_notch_dr": 3.0, "zeta_notch_dr": 0.3, "depth_notch_dr": 0.6}),
+    Case("hover mode r 5 rad/s zeta 0.05/0.15", "hover", 406,
+         (_e("structural_mode", output="r", omega_rad_s=5.0, zeta_pole=0.05, zeta_zero=0.15),),
+         {("structural_mode", "r")}, {"w_mode_r": 5.0, "zeta_mode_r": 0.05, "zeta_zero_mode_r": 0.15}),
+    Case("hover skew 60 ms p", "hover", 407, (_e("sensor_skew", output="p", delay_s=0.06),), {("sensor_skew", "p")},
+         {"skew_p": 0.06}),
+    Case("hover missing Nr", "hover", 408, (), {("missing_derivative", "F[r][r]")}, {"F_r_r": -0.1416},
+         (("drop", "F", "r", "r", "Nr"),)),
+    Case("hover lag dr + skew phi", "hover", 409,
+         (_e("actuator_lag", input="dr", time_constant_s=0.15), _e("sensor_skew", output="phi", delay_s=0.03)),
+         {("actuator_lag", "dr"), ("sensor_skew", "phi")}, {"w_act_dr": 1 / 0.15, "skew_phi": 0.03}),
+    Case("quad delay 10 ms roll", "quad", 401, (_e("time_delay", input="roll_cmd", delay_s=0.01),),
+         {("time_delay", "roll_cmd")}, {"tau_roll": TAU_Q + 0.01}),
+    Case("quad delay 30 ms pitch", "quad", 402, (_e("time_delay", input="pitch_cmd", delay_s=0.03),),
+         {("time_delay", "pitch_cmd")}, {"tau_pitch": TAU_Q + 0.03}),
+    Case("quad lag 15 ms pitch", "quad", 403, (_e("actuator_lag", input="pitch_cmd", time_constant_s=0.015),),
+         {("actuator_lag", "pitch_cmd")}, {"w_act_pitch_cmd": 1 / 0.015}),
+    Case("quad 2nd-order 40 rad/s zeta 0.5 roll", "quad", 404,
+         (_e("actuator_second_order", input="roll_cmd", omega_rad_s=40.0, zeta=0.5),), {("actuator_second_order", "roll_cmd")},
+         {"wn_act_roll_cmd": 40.0, "zeta_act_roll_cmd": 0.5}),
+    Case("quad notch 25 rad/s depth 0.6 pitch", "quad", 405,
+         (_e("notch_filter", input="pitch_cmd", omega_rad_s=25.0, zeta=0.2, depth=0.6),), {("notch_filter", "pitch_cmd")},
+         {"w_notch_pitch_cmd": 25.0, "zeta_notch_pitch_cmd": 0.2, "depth_notch_pitch_cmd": 0.6}),
+    Case("quad mode q 25 rad/s zeta 0.05/0.15", "quad", 406,
+         (_e("structural_mode", output="q", omega_rad_s=25.0, zeta_pole=0.05, zeta_zero=0.15),),
+         {("structural_mode", "q")}, {"w_mode_q": 25.0, "zeta_mode_q": 0.05, "zeta_zero_mode_q": 0.15}),
+    Case("quad mode p 15 rad/s zeta 0.06/0.2", "quad", 407,
+         (_e("structural_mode", output="p", omega_rad_s=15.0, zeta_pole=0.06, zeta_zero=0.2),),
+         {("structural_mode", "p")}, {"w_mode_p": 15.0, "zeta_mode_p": 0.06, "zeta_zero_mode_p": 0.2}),
+    Case("quad skew 15 ms phi", "quad", 408, (_e("sensor_skew", output="phi", delay_s=0.015),),
+         {("sensor_skew", "phi")}, {"skew_phi": 0.015}),
+    Case("quad scale 0.8 p", "quad", 409, (_e("scale_factor", output="p", factor=0.8),),
+         {("scale_factor", "p")}, {"k_p": 0.8}),
+    Case("quad missing Mq", "quad", 410, (), {("missing_derivative", "F[q][q]")}, {"F_q_q": -3.4},
+         (("drop", "F", "q", "q", "Mq"),)),
+    Case("quad notch roll + skew theta", "quad", 411,
+         (_e("notch_filter", input="roll_cmd", omega_rad_s=15.0, zeta=0.2, depth=0.7),
+          _e("sensor_skew", output="theta", delay_s=0.02)),
+         {("notch_filter", "roll_cmd"), ("sensor_skew", "theta")}, {"w_notch_roll_cmd": 15.0, "skew_theta": 0.02}),
+]
+HELD_OUT_3_CLEAN = ([Case(f"clean cruise seed {s}", "cruise", s) for s in range(440, 448)]
+                    + [Case(f"clean hover seed {s}", "hover", s) for s in range(440, 447)]
+                    + [Case(f"clean quad seed {s}", "quad", s) for s in range(440, 446)]
+                    + [Case("clean cruise calm air", "cruise", 448, turbulence=0.0),
+                       Case("clean cruise full turbulence", "cruise", 449, turbulence=1.0)])
+
+
 def _summary(results, clean):
     ok = 0
     conf = Counter()
@@ -479,11 +571,14 @@ def main(argv=None) -> None:
     ap.add_argument("--development", action="store_true", help="run the development set (looked at while tuning)")
     ap.add_argument("--held-out-2", action="store_true",
                     help="run the second held-out set (written after the last change to the loop)")
+    ap.add_argument("--held-out-3", action="store_true",
+                    help="run the third held-out set (written after the last change to the loop, stop 22)")
     ap.add_argument("-j", type=int, default=1, help="processes")
     ap.add_argument("--only", default=None, help="airframe name or a substring of case names")
     a = ap.parse_args(argv)
     cases = (CALIBRATION if a.calibrate else DEVELOPMENT + DEVELOPMENT_CLEAN if a.development
-             else HELD_OUT_2 + HELD_OUT_2_CLEAN if a.held_out_2 else HELD_OUT + HELD_OUT_CLEAN)
+             else HELD_OUT_2 + HELD_OUT_2_CLEAN if a.held_out_2 else HELD_OUT_3 + HELD_OUT_3_CLEAN if a.held_out_3
+             else HELD_OUT + HELD_OUT_CLEAN)
     if a.only:
         cases = [c for c in cases if a.only == c.airframe or a.only in c.name]
     t0 = time.perf_counter()
