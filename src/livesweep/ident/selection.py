@@ -186,8 +186,9 @@ def prefers(ss_simple: float, k_simple: int, ss_rich: float, k_rich: int, n_poin
 
 
 def indistinguishable(ss_a: float, ss_b: float, n_points: float, n_model: int, k: int,
-                      alpha: float = FALSE_ALARM) -> bool:
+                      alpha: float = FALSE_ALARM, n_tests: int = 1) -> bool:
     """Whether two rival effects explain the data equally within noise: their sums of squares
-    differ by less than one parameter's F-test at ``alpha`` would need."""
+    differ by less than one parameter's F-test at ``alpha / n_tests`` would need (with
+    ``n_tests`` the candidates screened, the difference must be what adding an effect needs)."""
     lo, hi = sorted((ss_a, ss_b))
-    return not significance(hi, lo, 1, n_points, n_model + k, 1, alpha).significant
+    return not significance(hi, lo, 1, n_points, n_model + k, n_tests, alpha).significant
