@@ -456,6 +456,9 @@ def test_rivals_are_those_the_data_prefer_no_more_than_an_effect_to_nothing():
     far["evidence_after"] = 53290.0                                          # now as good: a rival
     assert ("time_delay", "dr") in [(r["kind"], r["where"]) for r in _rivals(chosen, tried, judge, n_model)]
     far["evidence_after"] = 53290.0 - 1.2 * need(m)
+    second["accepted"] = False                                               # richer and undetermined: not listed
+    assert "actuator_second_order" not in [r["kind"] for r in _rivals(chosen, tried, judge, n_model)]
+    second["accepted"] = True
     second["evidence_after"] = 53290.0 + between                             # richer, better by more than one test
     assert [r["kind"] for r in _rivals(chosen, tried, judge, n_model)] == ["actuator_lag", "sensor_skew"]
     judge.n_tests = 1

@@ -522,7 +522,9 @@ def _rivals(rec, tried, judge, n_model) -> list[dict]:
     (:func:`~livesweep.ident.selection.indistinguishable`). A rival with no more parameters than
     the chosen one is held to the loop's screening level (the candidates screened counted: the
     data prefer one to the other no more than they would prefer an effect to nothing), a richer
-    one, which nests the simpler shape and so explains at least as much, to a single test."""
+    one, which nests the simpler shape and so explains at least as much, to a single test, and
+    only when it was accepted (a second-order actuator whose damping the data cannot pin down is
+    the chosen lag with a useless parameter, not an alternative)."""
     if rec.get("with"):
         return []
     out, seen, k = [], {(rec["kind"], rec["where"])}, _size((rec, None))
@@ -530,6 +532,8 @@ def _rivals(rec, tried, judge, n_model) -> list[dict]:
         if (t is rec or not t.get("shape_held") or t.get("with") or (t["kind"], t["where"]) in seen
                 or (t["kind"] != rec["kind"] and t["where"] != rec["where"])):
             continue
+        if len(t["parameters"]) > k and not t["accepted"]:
+            continue             # the chosen shape with parameters the data cannot pin down: no alternative
         n_tests = judge.n_tests if len(t["parameters"]) <= k else 1
         if indistinguishable(t["ss_before"] - t["evidence_after"], rec["ss_before"] - rec["evidence_after"],
                              judge.n_points, n_model, k, judge.alpha, n_tests):
