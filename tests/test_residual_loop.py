@@ -558,3 +558,21 @@ def test_verification_worse_needs_the_loops_false_alarm_level():
     assert ch["verdict"] == expect
     loose = _verification_change(a, b, alpha=0.5)                      # z = 0: any change decides
     assert loose["verdict"] == ("worse" if sigmas > 0 else "improved")
+
+
+
+def test_a_derivative_held_far_from_its_value_is_screened_along_the_exact_response():
+    """Lda held fixed at a quarter of the simulator's value: the fit bends the other derivatives to
+    J_ave above 200, and ln|p/da| is far from linear in Lda over that distance (linearised, the
+    step reaches 0.63 of the simulator's Lda and a scale factor on p ranks first). The exact line
+    search along Lda ranks freeing it first, at the simulator's value within 25 %."""
+    frs, _ = _data([], seed=13)
+    table = _table()
+    truth = TRUTH.derivatives["Lda"]
+    table["parameters"]["Lda"] = {"value": 0.25 * truth, "fixed": True}
+    model = StateSpaceModel.from_table(table)
+    pairs, _ = select_pairs(frs, model, n_omega=100)
+    fit = fit_state_space(model, pairs)
+    top = diagnose(table_with_fit(table, fit), fit, pairs, frs)[0]
+    assert (top.kind, top.where) == ("missing_derivative", "Lda"), top
+    assert top.parameters["value"] == pytest.approx(truth, rel=0.25)

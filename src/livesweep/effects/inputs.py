@@ -20,6 +20,11 @@ ZETA_ACT_GRID = (0.3, 0.5, 0.7, 1.0)
 ZETA_RES_GRID = (0.03, 0.06, 0.1, 0.2, 0.4)
 #: Grid points per screened frequency range.
 N_GRID = 48
+#: Grid points (best linearised evidence first) whose gain is searched with the exact factor.
+N_EXACT = 6
+#: Multiples of the linearised gain tried there. A deep notch is not linear in its depth
+#: (``ln(1 - 0.7) = -1.2``, not ``-0.7``, at its centre): the linearised evidence underrates it.
+GAIN_STEPS = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0)
 
 
 def resonance(omega_rad_s, w: float, z: float, gain: float, direct: float = 1.0):
@@ -47,8 +52,17 @@ def resonance_screen(space, select):
             params.append((float(w0), z))
     a, ev = space.linear_grid(np.column_stack(V))
     ev = np.where(a > -0.95, ev, -np.inf)
-    k = int(np.argmax(ev))
-    return params[k][0], params[k][1], float(a[k]), float(ev[k])
+    best = (0.0, 0.0, 0.0, -np.inf)
+    for k in np.argsort(-ev)[:N_EXACT]:
+        if not np.isfinite(ev[k]):
+            break
+        w0, z = params[k]
+        for m in GAIN_STEPS:
+            g = max(float(a[k]) * m, -0.95)
+            e = space.shape(space.signature(lambda w, w0=w0, z=z, g=g: np.log(resonance(w, w0, z, g)), select))
+            if e > best[3]:
+                best = (w0, z, g, e)
+    return best[0], best[1], best[2], float(best[3])
 
 
 def _delay_slope(space, select):

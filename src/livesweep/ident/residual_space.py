@@ -134,6 +134,19 @@ class ResidualSpace:
             return self.full[:, k]
         return self.log_jacobian_all(model, theta)[:, k]
 
+    def evidence_at(self, model, theta) -> float:
+        """Evidence of moving to ``model`` at ``theta`` (the space's model with a parameter changed
+        or added): the drop of the whitened sum of squares from the exact residual there (not
+        linearised in the change), after the space's model parameters re-adjust linearly."""
+        parts = []
+        for p in self.pairs:
+            T = model.frequency_response(theta, p.omega)[model.outputs.index(p.output), model.inputs.index(p.input)]
+            mag = p.magnitude_db - _DB * np.log(np.abs(T))
+            ph = np.angle(np.exp(1j * np.deg2rad(p.phase_deg)) / T, deg=True)
+            parts.append(np.concatenate([mag, ph]))
+        pr = self.project(np.concatenate(parts) / self.sig)
+        return self.base - float(pr @ pr)
+
     def signature(self, factor_fn, select):
         """Whitened (dB, deg) of ``ln factor(omega)`` on the selected pairs, zero elsewhere.
 
