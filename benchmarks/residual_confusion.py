@@ -11,6 +11,7 @@ injected that the airframe's shipped case does not declare; the loop runs on the
     python benchmarks/residual_confusion.py --held-out-2  # the second held-out set (see HELD_OUT_2)
     python benchmarks/residual_confusion.py --held-out-3  # the third (see HELD_OUT_3)
     python benchmarks/residual_confusion.py --held-out-4  # the fourth (see HELD_OUT_4)
+    python benchmarks/residual_confusion.py --held-out-5  # the fifth (see HELD_OUT_5)
     python benchmarks/residual_confusion.py -j 2 --only hover
 
 The calibration set (clean XV-15 cruise, seeds 30-43 at full and half turbulence) is the only
@@ -639,6 +640,98 @@ HELD_OUT_4_CLEAN = ([Case(f"clean cruise seed {s}", "cruise", s) for s in range(
                     + [Case("clean cruise calm air", "cruise", 548, turbulence=0.0),
                        Case("clean cruise full turbulence", "cruise", 549, turbulence=1.0)])
 
+#: A fifth held-out set, written after the last change to the loop (stop 24: a missing derivative
+#: screened along the exact response, a resonance's gain with the exact factor) and run once on it:
+#: seeds 601-649, effects inside the coherent band, new magnitudes and places.
+HELD_OUT_5 = [
+    Case("cruise delay 30 ms dr", "cruise", 601, (_e("time_delay", input="dr", delay_s=0.03),), {("time_delay", "dr")},
+         {"tau_r": TAU_R + 0.03}, (("fix", "tau_r", TAU_R),)),
+    Case("cruise lag 80 ms dr", "cruise", 602, (_e("actuator_lag", input="dr", time_constant_s=0.08),),
+         {("actuator_lag", "dr")}, {"w_act_dr": 12.5}),
+    Case("cruise 2nd-order 8 rad/s zeta 0.6 da", "cruise", 603,
+         (_e("actuator_second_order", input="da", omega_rad_s=8.0, zeta=0.6),), {("actuator_second_order", "da")},
+         {"wn_act_da": 8.0, "zeta_act_da": 0.6}),
+    Case("cruise notch 9 rad/s depth 0.8 da", "cruise", 604,
+         (_e("notch_filter", input="da", omega_rad_s=9.0, zeta=0.3, depth=0.8),), {("notch_filter", "da")},
+         {"w_notch_da": 9.0, "zeta_notch_da": 0.3, "depth_notch_da": 0.8}),
+    Case("cruise mode p 14 rad/s zeta 0.08/0.25", "cruise", 605,
+         (_e("structural_mode", output="p", omega_rad_s=14.0, zeta_pole=0.08, zeta_zero=0.25),),
+         {("structural_mode", "p")}, {"w_mode_p": 14.0, "zeta_mode_p": 0.08, "zeta_zero_mode_p": 0.25}),
+    Case("cruise mode beta 10 rad/s zeta 0.05/0.15", "cruise", 606,
+         (_e("structural_mode", output="beta", omega_rad_s=10.0, zeta_pole=0.05, zeta_zero=0.15),),
+         {("structural_mode", "beta")}, {"w_mode_beta": 10.0, "zeta_mode_beta": 0.05, "zeta_zero_mode_beta": 0.15}),
+    Case("cruise skew 40 ms r", "cruise", 607, (_e("sensor_skew", output="r", delay_s=0.04),),
+         {("sensor_skew", "r")}, {"skew_r": 0.04}),
+    Case("cruise scale 1.2 p", "cruise", 608, (_e("scale_factor", output="p", factor=1.2),),
+         {("scale_factor", "p")}, {"k_p": 1.2}),
+    Case("cruise missing Nv", "cruise", 609, (), {("missing_derivative", "F[r][v]")}, {"F_r_v": 0.00724},
+         (("drop", "F", "r", "v", "Nv"),)),
+    Case("cruise notch da + skew r", "cruise", 610,
+         (_e("notch_filter", input="da", omega_rad_s=7.0, zeta=0.3, depth=0.7), _e("sensor_skew", output="r", delay_s=0.03)),
+         {("notch_filter", "da"), ("sensor_skew", "r")}, {"w_notch_da": 7.0, "skew_r": 0.03}),
+    Case("cruise input skew 40 ms dr", "cruise", 611, (), {("sensor_skew", "dr")}, {"skew_dr": 0.04},
+         (("fix", "tau_r", TAU_R),), log_late=("dr", 0.04)),
+    Case("hover delay 50 ms da", "hover", 601, (_e("time_delay", input="da", delay_s=0.05),), {("time_delay", "da")},
+         {"tau_da": 0.05}),
+    Case("hover lag 0.12 s dr", "hover", 602, (_e("actuator_lag", input="dr", time_constant_s=0.12),),
+         {("actuator_lag", "dr")}, {"w_act_dr": 1 / 0.12}),
+    Case("hover 2nd-order 8 rad/s zeta 0.7 dr", "hover", 603,
+         (_e("actuator_second_order", input="dr", omega_rad_s=8.0, zeta=0.7),), {("actuator_second_order", "dr")},
+         {"wn_act_dr": 8.0, "zeta_act_dr": 0.7}),
+    Case("hover notch 3 rad/s depth 0.7 da", "hover", 604,
+         (_e("notch_filter", input="da", omega_rad_s=3.0, zeta=0.3, depth=0.7),), {("notch_filter", "da")},
+         {"w_notch_da": 3.0, "zeta_notch_da": 0.3, "depth_notch_da": 0.7}),
+    Case("hover mode r 6 rad/s zeta 0.05/0.15", "hover", 605,
+         (_e("structural_mode", output="r", omega_rad_s=6.0, zeta_pole=0.05, zeta_zero=0.15),),
+         {("structural_mode", "r")}, {"w_mode_r": 6.0, "zeta_mode_r": 0.05, "zeta_zero_mode_r": 0.15}),
+    Case("hover skew 40 ms p", "hover", 606, (_e("sensor_skew", output="p", delay_s=0.04),),
+         {("sensor_skew", "p")}, {"skew_p": 0.04}),
+    Case("hover scale 0.8 phi", "hover", 607, (_e("scale_factor", output="phi", factor=0.8),),
+         {("scale_factor", "phi")}, {"k_phi": 0.8}),
+    Case("hover missing Lv", "hover", 608, (), {("missing_derivative", "F[p][v]")}, {"F_p_v": -0.004374},
+         (("drop", "F", "p", "v", "Lv"),)),
+    Case("hover lag da + mode r", "hover", 609,
+         (_e("actuator_lag", input="da", time_constant_s=0.1),
+          _e("structural_mode", output="r", omega_rad_s=8.0, zeta_pole=0.05, zeta_zero=0.2)),
+         {("actuator_lag", "da"), ("structural_mode", "r")}, {"w_act_da": 10.0, "w_mode_r": 8.0}),
+    Case("hover delay 0.1 s dr", "hover", 610, (_e("time_delay", input="dr", delay_s=0.1),), {("time_delay", "dr")},
+         {"tau_dr": 0.1}),
+    Case("quad delay 25 ms pitch", "quad", 601, (_e("time_delay", input="pitch_cmd", delay_s=0.025),),
+         {("time_delay", "pitch_cmd")}, {"tau_pitch": TAU_Q + 0.025}),
+    Case("quad lag 20 ms pitch", "quad", 602, (_e("actuator_lag", input="pitch_cmd", time_constant_s=0.02),),
+         {("actuator_lag", "pitch_cmd")}, {"w_act_pitch_cmd": 50.0}),
+    Case("quad 2nd-order 25 rad/s zeta 0.6 roll", "quad", 603,
+         (_e("actuator_second_order", input="roll_cmd", omega_rad_s=25.0, zeta=0.6),),
+         {("actuator_second_order", "roll_cmd")}, {"wn_act_roll_cmd": 25.0, "zeta_act_roll_cmd": 0.6}),
+    Case("quad notch 12 rad/s depth 0.7 roll", "quad", 604,
+         (_e("notch_filter", input="roll_cmd", omega_rad_s=12.0, zeta=0.25, depth=0.7),), {("notch_filter", "roll_cmd")},
+         {"w_notch_roll_cmd": 12.0, "zeta_notch_roll_cmd": 0.25, "depth_notch_roll_cmd": 0.7}),
+    Case("quad mode p 15 rad/s zeta 0.05/0.15", "quad", 605,
+         (_e("structural_mode", output="p", omega_rad_s=15.0, zeta_pole=0.05, zeta_zero=0.15),),
+         {("structural_mode", "p")}, {"w_mode_p": 15.0, "zeta_mode_p": 0.05, "zeta_zero_mode_p": 0.15}),
+    Case("quad mode q 9 rad/s zeta 0.06/0.2", "quad", 606,
+         (_e("structural_mode", output="q", omega_rad_s=9.0, zeta_pole=0.06, zeta_zero=0.2),),
+         {("structural_mode", "q")}, {"w_mode_q": 9.0, "zeta_mode_q": 0.06, "zeta_zero_mode_q": 0.2}),
+    Case("quad skew 20 ms phi", "quad", 607, (_e("sensor_skew", output="phi", delay_s=0.02),),
+         {("sensor_skew", "phi")}, {"skew_phi": 0.02}),
+    Case("quad skew 35 ms theta", "quad", 608, (_e("sensor_skew", output="theta", delay_s=0.035),),
+         {("sensor_skew", "theta")}, {"skew_theta": 0.035}),
+    Case("quad scale 0.8 q", "quad", 609, (_e("scale_factor", output="q", factor=0.8),),
+         {("scale_factor", "q")}, {"k_q": 0.8}),
+    Case("quad missing Lpitch", "quad", 610, (), {("missing_derivative", "G[p][pitch_cmd]")}, {"G_p_pitch_cmd": 4.0},
+         (("drop", "G", "p", "pitch_cmd", "Lpitch"),)),
+    Case("quad delay roll + mode q", "quad", 611,
+         (_e("time_delay", input="roll_cmd", delay_s=0.02),
+          _e("structural_mode", output="q", omega_rad_s=12.0, zeta_pole=0.05, zeta_zero=0.15)),
+         {("time_delay", "roll_cmd"), ("structural_mode", "q")}, {"tau_roll": TAU_Q + 0.02, "w_mode_q": 12.0}),
+]
+HELD_OUT_5_CLEAN = ([Case(f"clean cruise seed {s}", "cruise", s) for s in range(640, 648)]
+                    + [Case(f"clean hover seed {s}", "hover", s) for s in range(640, 647)]
+                    + [Case(f"clean quad seed {s}", "quad", s) for s in range(640, 646)]
+                    + [Case("clean cruise calm air", "cruise", 648, turbulence=0.0),
+                       Case("clean cruise full turbulence", "cruise", 649, turbulence=1.0)])
+
+
 def _summary(results, clean):
     """(right, named, confusion): ``right`` counts the cases whose added effects are exactly the
     injected ones (or a scale error reported as one the data cannot show); ``named`` also counts
@@ -678,12 +771,15 @@ def main(argv=None) -> None:
                     help="run the third held-out set (written after the last change to the loop, stop 22)")
     ap.add_argument("--held-out-4", action="store_true",
                     help="run the fourth held-out set (written after the last change to the loop, stop 23)")
+    ap.add_argument("--held-out-5", action="store_true",
+                    help="run the fifth held-out set (written after the last change to the loop, stop 24)")
     ap.add_argument("-j", type=int, default=1, help="processes")
     ap.add_argument("--only", default=None, help="airframe name or a substring of case names")
     a = ap.parse_args(argv)
     cases = (CALIBRATION if a.calibrate else DEVELOPMENT + DEVELOPMENT_CLEAN if a.development
              else HELD_OUT_2 + HELD_OUT_2_CLEAN if a.held_out_2 else HELD_OUT_3 + HELD_OUT_3_CLEAN if a.held_out_3
-             else HELD_OUT_4 + HELD_OUT_4_CLEAN if a.held_out_4 else HELD_OUT + HELD_OUT_CLEAN)
+             else HELD_OUT_4 + HELD_OUT_4_CLEAN if a.held_out_4
+             else HELD_OUT_5 + HELD_OUT_5_CLEAN if a.held_out_5 else HELD_OUT + HELD_OUT_CLEAN)
     if a.only:
         cases = [c for c in cases if a.only == c.airframe or a.only in c.name]
     t0 = time.perf_counter()
