@@ -576,3 +576,25 @@ def test_a_derivative_held_far_from_its_value_is_screened_along_the_exact_respon
     top = diagnose(table_with_fit(table, fit), fit, pairs, frs)[0]
     assert (top.kind, top.where) == ("missing_derivative", "Lda"), top
     assert top.parameters["value"] == pytest.approx(truth, rel=0.25)
+
+
+def test_a_pair_the_model_has_no_path_for_is_skipped_with_its_reason_and_the_loop_runs():
+    """The rudder column removed from the cruise model (Ydr, Ldr, Ndr): every output's response to
+    dr is zero by the model's structure, though the simulated data are coherent there. Those pairs
+    cannot be fitted in dB; they are skipped with the reason (before, the residual loop stopped on
+    a LinAlgError from the infinite residual)."""
+    frs, _ = _data([], seed=13)
+    table = _table()
+    for row in range(3):
+        table["G"][row][1] = "0"
+    table["J"][2][1] = "0"
+    for name in ("Ydr", "Ldr", "Ndr"):
+        del table["parameters"][name]
+    model = StateSpaceModel.from_table(table)
+    pairs, skipped = select_pairs(frs, model)
+    coherent = {o for o in OUTPUTS if np.nanmax(frs.pair(o, "dr").coherence) > 0.8}
+    assert coherent                                   # the data do show the rudder
+    assert {(o, i) for o, i, why in skipped if "no path" in why} == {(o, "dr") for o in coherent}
+    assert all(p.input == "da" for p in pairs)
+    loop = run_residual_loop(table, fit_state_space(model, pairs), frs)
+    assert loop.steps

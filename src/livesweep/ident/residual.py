@@ -312,6 +312,10 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
     steps, unexplained, n_fits = [], [], 1
     ver = verify(fit.model, fit.theta) if verify else None
     before = tuple(pair_residuals(fit.model, fit.theta, pairs, frs))
+    for r in before:
+        if not (np.all(np.isfinite(r.magnitude_db)) and np.all(np.isfinite(r.phase_deg))):
+            raise ConfigError(f"residual loop: the fitted model's response {r.output}/{r.input} is zero or not finite "
+                              f"at some fitting points; the loop cannot compare it with the data in dB")
     any_significant, limits = False, []
     for _ in range(max_steps + 1):
         ss_before = whitened_ss(before)

@@ -639,10 +639,32 @@ def select_pairs(frs, model: StateSpaceModel, *, bands: dict | None = None, min_
                                           f"{min_decades:g} decade"))
                     continue
             try:
-                pairs.append(fit_points(resp, band, n_omega, min_coherence))
+                pd = fit_points(resp, band, n_omega, min_coherence)
             except ConfigError as exc:
                 skipped.append((o, i, str(exc)))
+                continue
+            if _no_path(model, o, i, pd.omega):
+                skipped.append((o, i, "the model has no path from this input to this output (response identically "
+                                      "zero) though the data are coherent: a coupling the model lacks?"))
+                continue
+            pairs.append(pd)
     return pairs, skipped
+
+
+def _no_path(model: StateSpaceModel, output: str, input: str, omega) -> bool:
+    """Whether the model's response ``output/input`` is identically zero by its structure (zero at
+    the initial values and at other generic ones): it has no magnitude in dB to fit."""
+    i, j = model.outputs.index(output), model.inputs.index(input)
+    th0 = np.asarray(model.initial, float)
+    for th in (th0, 1.1 * th0 + 0.1):
+        with np.errstate(all="ignore"):
+            try:
+                T = model.frequency_response(th, omega)[i, j]
+            except np.linalg.LinAlgError:
+                return False
+        if not np.all(T == 0.0):
+            return False
+    return True
 
 
 def a_priori_eliminations(model: StateSpaceModel, skipped_pairs) -> dict:
