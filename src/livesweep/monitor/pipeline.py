@@ -429,7 +429,7 @@ class MonitorPipeline:
             # an ended test point no samples reach (no telemetry at all): judged on what it has
             self._drain_blocks()
             if records := self.test_points.expire(t):
-                self._test_point_records(records)
+                self._test_point_records(records, log_time_ns=f.receive_ns)
 
     def _drain_blocks(self) -> None:
         """Every block the aligner has ready, now: what follows (a test-point event, a map alert)
@@ -446,9 +446,10 @@ class MonitorPipeline:
         rx, t = self._rx_to_data
         return t + (receive_ns - rx) * 1e-9
 
-    def _test_point_records(self, records) -> None:
+    def _test_point_records(self, records, log_time_ns: int | None = None) -> None:
         """Show, publish and (when closed) record test points, each followed by the operator's verdict
-        at its own data time (so a replay changes the verdict where the live run did)."""
+        at its own data time (so a replay changes the verdict where the live run did). A closed
+        record is logged at ``log_time_ns`` (the receipt of the frame that decided it), else now."""
         for t_s, rec in records:
             if rec["state"] == "ignored":
                 continue
@@ -456,7 +457,8 @@ class MonitorPipeline:
                 self.view.log_test_point(t_s, rec)
             if rec["state"] == "closed":
                 if self.recorder is not None:
-                    self.recorder.record_result("test_point", rec, log_time_ns=receive_ns(), flush=True)
+                    self.recorder.record_result("test_point", rec, flush=True,
+                                                log_time_ns=receive_ns() if log_time_ns is None else log_time_ns)
                 if self.publisher is not None:
                     self.publisher.publish("test_point", rec)
             self._update_verdict(t_s, rec)
@@ -610,11 +612,12 @@ class MonitorPipeline:
             if self.totals.estimates % max(1, self.s.results_every) == 0:
                 self.recorder.record_result("estimate", payload, log_time_ns=receive_ns())
 
-    def _record_alert(self, t_s: float | None, alert: Alert) -> None:
+    def _record_alert(self, t_s: float | None, alert: Alert, log_time_ns: int | None = None) -> None:
         self.alerts_raised += 1
         if self.recorder is not None:
             self.recorder.record_result("alert", {"t_s": t_s, "kind": alert.kind, "message": alert.message,
-                                                  "value": float(alert.value)}, log_time_ns=receive_ns())
+                                                  "value": float(alert.value)},
+                                        log_time_ns=receive_ns() if log_time_ns is None else log_time_ns)
 
     # -- link counters ------------------------------------------------------------------------
     def counters(self) -> dict:
@@ -644,7 +647,7 @@ class MonitorPipeline:
         """Record the counters on ``/livesweep/link`` and raise a ``link`` alert for what grew."""
         self._last_report = now
         if final and self.map_problems is None and self._topics_seen:
-            self._diagnose()                 # a run shorter than DIAGNOSE_AFTER_S
+            self._diagnose(receive_ns())     # a run shorter than DIAGNOSE_AFTER_S
         for src in self.sources:
             refresh = getattr(src, "refresh_kernel_drops", None)
             if refresh is not None:
@@ -691,11 +694,11 @@ class MonitorPipeline:
             if self._first_rx is None:
                 self._first_rx = receive_ns
             elif receive_ns - self._first_rx >= DIAGNOSE_AFTER_S * 1e9:
-                self._diagnose()
+                self._diagnose(receive_ns)
         else:
-            self._map_found_later()
+            self._map_found_later(receive_ns)
 
-    def _diagnose(self) -> None:
+    def _diagnose(self, receive_ns: int) -> None:
         """Every signal of the map that found nothing, and why (an absent topic, a misspelt field, a
         selection nothing matches), as a ``map`` alert, a warning on stderr and ``map_problems``
         in the summary."""
@@ -707,9 +710,9 @@ class MonitorPipeline:
         if self.map_problems:
             self._drain_blocks()
         for line in self.map_problems:
-            self._map_alert(line)
+            self._map_alert(line, receive_ns)
 
-    def _map_found_later(self) -> None:
+    def _map_found_later(self, receive_ns: int) -> None:
         """A signal the diagnosis found missing that has samples now (a vehicle that starts its
         streams once armed): say so, so the early warning does not stand."""
         found = [n for n in self._map_missing if self.aligner.signal_counts[n]["samples"] > 0]
@@ -718,12 +721,15 @@ class MonitorPipeline:
         for n in found:
             self._map_missing.remove(n)
             left = len(self._map_missing)
-            self._map_alert(f"signal {n}: found now ({'every signal found' if not left else f'{left} still missing'})")
+            self._map_alert(f"signal {n}: found now ({'every signal found' if not left else f'{left} still missing'})",
+                            receive_ns)
 
-    def _map_alert(self, line: str) -> None:
+    def _map_alert(self, line: str, receive_ns: int) -> None:
+        """A ``map`` alert, recorded at the receive time of the frame that raised it (not when a busy
+        process got to write it), so its time says when the link showed the problem."""
         log.warning("monitor: %s", line)
         a = Alert("map", line, 1.0)
-        self._record_alert(self._t_data, a)
+        self._record_alert(self._t_data, a, log_time_ns=receive_ns)
         if self.view is not None:
             self.view.log_alerts(self._t_data if self._t_data is not None else 0.0, [(a.kind, a.message)])
         if self.publisher is not None:
