@@ -330,11 +330,13 @@ def test_a_notch_on_clean_hover_is_not_made_acceptable_by_fixing(seed):
     assert loop.added == ()
 
 
-def _hover(effects, seed):
+def _hover(effects, seed, edit=None):
     """A hover test point (the pilot's loop closed in the simulator) with ``effects``, analysed; the
-    shipped hover case's model fitted to it."""
+    shipped hover case's model (changed by ``edit(table)``, if given) fitted to it."""
     case = load_case("config/xv15_hover_lateral.toml")
     table = copy.deepcopy(case.tables["state_space"])
+    if edit is not None:
+        edit(table)
     sc = sweep_scenario("xv15-hover", axes=("da", "dr"), repeats=2, omega_min_rad_s=0.2, omega_max_rad_s=12.0,
                         duration_s=100.0, amplitudes={"da": 1.5, "dr": 3.0}, off_axis_rms=0.2, seed=seed,
                         effects=tuple(effects), turbulence_scale=0.5)
@@ -598,3 +600,35 @@ def test_a_pair_the_model_has_no_path_for_is_skipped_with_its_reason_and_the_loo
     assert all(p.input == "da" for p in pairs)
     loop = run_residual_loop(table, fit_state_space(model, pairs), frs)
     assert loop.steps
+
+
+def _drop_nda(t):
+    t["G"][t["states"].index("r")][t["inputs"].index("da")] = "0"
+    del t["parameters"]["Nda"]
+
+
+def test_a_control_derivative_the_fit_made_up_for_is_found_by_refitting_every_missing_one():
+    """Hover, the model without Nda (yaw due to aileron). The fit bends the other derivatives to
+    make up for it (J_ave about 70: inside the method's <= 100 guideline, but the whitened residual's
+    mean square is far above NOISE_INFLATION), and about that fit the screen ranks G[r][da] nowhere
+    near significant (ln|r/da| is far from linear in Nda there). The loop, seeing the lack of fit,
+    refits every missing derivative from the case's starting values and adds Nda: within 3
+    Cramer-Rao bounds of the simulator's, the cost at least halved, nothing else added.
+    Seed 81 was not looked at while the lack-of-fit rule was set (hover seeds 408, 508 and 608
+    of benchmarks/residual_confusion.py were)."""
+    from livesweep.ident.selection import NOISE_INFLATION
+    from livesweep.sim.models import xv15_hover
+
+    frs, table, fit = _hover([], seed=81, edit=_drop_nda)
+    loop = run_residual_loop(table, fit, frs)
+    first = loop.steps[0]
+    res = first.residuals_before
+    assert sum(np.sum((r.magnitude_db / r.sigma_db) ** 2 + (r.phase_deg / r.sigma_deg) ** 2) for r in res) \
+        > NOISE_INFLATION * sum(2 * r.omega.size for r in res)
+    screened = next(c for c in first.candidates if (c.kind, c.where) == ("missing_derivative", "G[r][da]"))
+    assert first.candidates.index(screened) >= 3          # the screen alone would not have refitted it
+    assert [(e["kind"], e["where"]) for e in loop.added] == [("missing_derivative", "G[r][da]")]
+    (p,) = loop.added[0]["parameters"]
+    truth = xv15_hover().derivatives["Nda"]
+    assert abs(p["value"] - truth) <= 3 * p["cramer_rao_pct"] / 100 * abs(p["value"]), (p, truth)
+    assert loop.fit.cost_average <= 0.5 * first.cost_before

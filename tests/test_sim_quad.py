@@ -19,6 +19,7 @@ Eliminating v and phi (u and theta) gives, with ``D_roll = s (s - Yv)(s - Lp) - 
 
 from __future__ import annotations
 
+import json
 import math
 import time
 import tomllib
@@ -174,8 +175,8 @@ def _case_table() -> dict:
         return tomllib.load(f)["state_space"]
 
 
-def _fit(frs):
-    model = StateSpaceModel.from_table(_case_table())
+def _fit(frs, table=None):
+    model = StateSpaceModel.from_table(_case_table() if table is None else table)
     pairs, skipped = select_pairs(frs, model)
     return fit_state_space(model, pairs, skipped_pairs=skipped)
 
@@ -211,16 +212,38 @@ def test_the_case_identifies_the_model_back_from_a_simulated_sweep():
     assert_roots_close(fit.eigenvalues, m.eigenvalues(), rtol=0.15)
 
 
-def test_residual_loop_on_clean_quad_data_reports():
-    """The residual loop on clean data (no effect injected): printed, not asserted."""
+def test_residual_loop_on_clean_quad_data_adds_nothing():
+    """The residual loop on clean quadrotor data (no effect injected, seed 2): nothing added."""
     from livesweep.ident.residual import run_residual_loop
 
     frs = _frequency_responses(seed=2)
-    fit = _fit(frs)
-    t0 = time.perf_counter()
-    loop = run_residual_loop(_case_table(), fit, frs)
-    print(f"\nresidual loop on clean quad data ({time.perf_counter() - t0:.1f} s): {loop.conclusion}")
-    for c in loop.steps[0].candidates[:3]:
-        print("  ", c.to_dict())
-    for e in loop.added:
-        print("   added", e)
+    loop = run_residual_loop(_case_table(), _fit(frs), frs)
+    assert loop.added == (), loop.conclusion
+
+
+def test_a_coupling_the_model_lacks_is_given_to_the_coherent_pair_it_had_no_path_for():
+    """The case without Lpitch (roll due to pitch command): the model's p/pitch_cmd is zero by its
+    structure while the data are coherent there, so the pair is skipped and no residual screen
+    sees it. The loop tries each absent entry that gives the pair a path, refits on every pair,
+    and keeps G[p][pitch_cmd] at the simulator's Lpitch within 3 Cramer-Rao bounds; the pair is
+    then fitted and J_ave stays within the clean fit's guideline."""
+    from livesweep.ident.residual import run_residual_loop
+
+    table = _case_table()
+    table["G"][table["states"].index("p")][table["inputs"].index("pitch_cmd")] = "0"
+    del table["parameters"]["Lpitch"]
+    frs = _frequency_responses(seed=3)
+    fit = _fit(frs, table)
+    assert ("p", "pitch_cmd") not in {(o, i) for o, i, _ in fit.cost_pairs}
+    loop = run_residual_loop(table, fit, frs)
+    first = loop.added[0]
+    assert (first["kind"], first["where"]) == ("missing_derivative", "G[p][pitch_cmd]")
+    assert first["gives_a_path_for"] == ["p/pitch_cmd"]
+    (p,) = first["parameters"]
+    assert abs(p["value"] - D["Lpitch"]) <= 3 * p["cramer_rao_pct"] / 100 * abs(p["value"]), p
+    assert ("p", "pitch_cmd") in {(o, i) for o, i, _ in loop.fit.cost_pairs}
+    assert loop.fit.cost_average < 10.0
+    # the step's residual plot compares the same pairs before and after; report.json takes it
+    step = loop.steps[0]
+    assert [(r.output, r.input) for r in step.residuals_before] == [(r.output, r.input) for r in step.residuals_after]
+    json.dumps(loop.to_dict(), allow_nan=False)

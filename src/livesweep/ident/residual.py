@@ -22,8 +22,11 @@ reduction inside the effect). Rivals that both pass go to the simpler one unless
 extra parameters are significant; rival explanations of the same feature that the data prefer
 no more than they would prefer an effect to nothing are reported as hard to tell apart
 (:func:`_rivals`). When the best candidate fails alone, the strongest are tried in pairs, and a
-pair is kept only if each partner is significant on top of the other alone. The loop repeats
-until nothing significant remains or ``max_steps``.
+pair is kept only if each partner is significant on top of the other alone. When the fit is
+inadequate (J_ave above the guideline, or a whitened mean square above ``NOISE_INFLATION``) the
+screen underrates what refits explain: the best-ranked are refitted whatever their screening test
+and, if none is accepted, every missing derivative once. The loop repeats until nothing
+significant remains or ``max_steps``.
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ from livesweep.errors import ConfigError
 from livesweep.ident.accuracy import MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT
 from livesweep.ident.residual_space import (PairResidual, ResidualSpace, band_of, pair_residuals,
                                             whitened_ss)
+from livesweep.ident.coupling import find_coupling, no_path_pairs
 from livesweep.ident.selection import (FALSE_ALARM, NOISE_INFLATION, effective_points, indistinguishable, prefers,
                                        significance)
 from livesweep.ident.state_space import StateSpaceFit, StateSpaceModel, fit_state_space
@@ -156,7 +160,8 @@ class LoopStep:
     def to_dict(self) -> dict:
         return {"effect": self.effect, "cost_before": round(self.cost_before, 4), "cost_after": round(self.cost_after, 4),
                 "verification_before": self.verification_before, "verification_after": self.verification_after,
-                "candidates": [c.to_dict() for c in self.candidates[:8]], "tried": list(self.tried)}
+                "candidates": [c.to_dict() for c in self.candidates[:8]],
+                "tried": [{**t, "cost_after": finite_or_none(t.get("cost_after"))} for t in self.tried]}
 
 
 @dataclass(frozen=True)
@@ -302,14 +307,36 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
 
     if not (0.0 < float(false_alarm) < 1.0):
         raise ConfigError(f"residual loop: false_alarm = {false_alarm!r} must be between 0 and 1")
-    pairs, _ = select_pairs(frs, fit.model, n_omega=n_omega)
+    pairs, skipped = select_pairs(frs, fit.model, n_omega=n_omega)
     if not pairs:
         raise ConfigError("residual loop: no pair of the model has usable coherence")
     fit = fit_state_space(fit.model.with_values(fit.theta), pairs)
     origin, table = table, table_with_fit(table, fit)
+    steps, n_fits = [], 1
+    if max_steps > 0 and no_path_pairs(skipped):
+        # coherent pairs the model has no path for: no residual in dB, so no screen sees them
+        coupling = find_coupling(table, origin, fit, frs, skipped, n_omega=n_omega, progress=progress)
+        n_fits += 1 if coupling is None else len(coupling.tried)
+        if coupling is not None:
+            old_pairs, before = pairs, tuple(pair_residuals(fit.model, fit.theta, pairs, frs))
+            pairs, _ = select_pairs(frs, coupling.fit.model, n_omega=n_omega)
+            cost_before, ver_before = fit.cost_average, verify(fit.model, fit.theta) if verify else None
+            fit, origin = coupling.fit, coupling.table
+            table = table_with_fit(origin, fit)
+            effect = {"kind": "missing_derivative", "where": coupling.where, "parameters": [coupling.parameter],
+                      "gives_a_path_for": [f"{o}/{i}" for o, i in coupling.pairs]}
+            if coupling.rivals:
+                effect["ambiguous_with"] = [{"kind": "missing_derivative", "where": w} for w in coupling.rivals]
+            tried = tuple({"kind": "missing_derivative", "where": t["where"], "cost_after": t["cost_after"],
+                           "accepted": t["where"] == coupling.where, "reason": t["reason"],
+                           "parameters": [t["parameter"]] if "parameter" in t else []} for t in coupling.tried)
+            # residuals on the pairs the model had before (the new ones had none to compare)
+            steps.append(LoopStep((), tried, effect, cost_before, fit.cost_average, _ver_summary(ver_before),
+                                  _ver_summary(verify(fit.model, fit.theta) if verify else None), before,
+                                  tuple(pair_residuals(fit.model, fit.theta, old_pairs, frs))))
     judge = _Judge(pairs, frs, verify, effective_points(pairs, getattr(frs, "settings", {})), float(false_alarm),
                    origin=origin)
-    steps, unexplained, n_fits = [], [], 1
+    unexplained = []
     ver = verify(fit.model, fit.theta) if verify else None
     before = tuple(pair_residuals(fit.model, fit.theta, pairs, frs))
     for r in before:
@@ -327,10 +354,13 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
         ranked = [c for _, c in scored]
         strong = [c for sig, c in scored if sig.significant]
         # The screen is linear about the current fit. When that fit fails the method's own J_ave
-        # guideline the model is far from the data, and the screen underrates what a refit explains
-        # (the derivatives re-adjust once the effect is in): the best-ranked are refitted anyway and
-        # the refit's own test decides.
-        inadequate = fit.cost_average > MAX_COST_AVERAGE
+        # guideline, or its whitened residual's mean square exceeds NOISE_INFLATION (the factor by
+        # which clean logs' structured residual exceeds noise), the model is far from the data and
+        # the screen underrates what a refit explains (the derivatives re-adjust once the effect is
+        # in): the best-ranked are refitted anyway, then every missing derivative, and each refit's
+        # own test decides.
+        n_values = sum(2 * r.omega.size for r in before)
+        inadequate = fit.cost_average > MAX_COST_AVERAGE or ss_before > NOISE_INFLATION * n_values
         any_significant = bool(strong) or inadequate
         if not strong and inadequate:
             strong = ranked
@@ -353,6 +383,12 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                 if len(singles) >= n_refit:
                     break
                 single(c)
+            if inadequate and not accepted:
+                # a derivative the fit compensated elsewhere screens far below what its refit
+                # (restarted from the case's values) explains: each is re-identified once
+                for c in ranked:
+                    if c.kind == "missing_derivative":
+                        single(c)
             leader = max(tried, key=lambda t: t.get("evidence_after", -np.inf), default=None)
             duo = []
             if leader is not None and not leader["accepted"] and len(steps) + 2 <= max_steps:

@@ -1,0 +1,167 @@
+"""A coupling the model lacks: a coherent pair the model has no path for, given one.
+
+:func:`~livesweep.ident.state_space.select_pairs` skips a pair whose model response is zero by
+the model's structure (no entry of F or G leads from the input to the output) while the data
+are coherent there. No residual in dB exists for such a pair, so the residual loop's screen cannot
+see it. Here every absent entry of a dynamic row of F or G (and every fixed derivative) that
+would give the pair a path is tried: its value started on a log grid against the pair's data
+alone, then the whole model refitted on all pairs, the new one included. The entry kept is the
+one whose refit converges, meets the accuracy guidelines (CR% <= 20, I% <= 10) and the method's
+J_ave <= 100, at the lowest J_ave; entries whose J_ave is within 10 % of it are reported as hard
+to tell apart.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import numpy as np
+
+from livesweep.effects.derivative import derivative_slots
+from livesweep.effects.table import add_entry, normalised
+from livesweep.errors import ConfigError
+from livesweep.ident.accuracy import MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT
+from livesweep.ident.state_space import StateSpaceFit, StateSpaceModel, fit_state_space, select_pairs
+
+__all__ = ["Coupling", "no_path_pairs", "find_coupling", "START_GRID", "RIVAL_COST_RATIO"]
+
+#: Magnitudes at which a new entry's starting value is tried, both signs (units of the entry).
+START_GRID = 10.0 ** np.arange(-4.0, 2.01, 0.25)
+#: Entries whose refit's J_ave is within this ratio of the best one's are reported as rivals.
+RIVAL_COST_RATIO = 1.10
+
+
+@dataclass(frozen=True)
+class Coupling:
+    """The entry added for pairs the model had no path for.
+
+    Attributes
+    ----------
+    where : str
+        ``"F[row][col]"``, ``"G[row][col]"`` or the freed parameter's name.
+    pairs : tuple of (str, str)
+        (output, input) pairs that had no path.
+    table : dict
+        The ``[state_space]`` table with the entry, the model's own parameters at the case's values.
+    fit : StateSpaceFit
+        The refit on every pair, the new ones included.
+    parameter : dict
+        The new parameter: name, value, cramer_rao_pct, insensitivity_pct.
+    tried : tuple of dict
+        Every entry tried: where, cost_after (J_ave, None when the refit failed), reason, parameter.
+    rivals : tuple of str
+        Entries that fit within :data:`RIVAL_COST_RATIO` of the kept one.
+    """
+
+    where: str
+    pairs: tuple
+    table: dict
+    fit: StateSpaceFit
+    parameter: dict
+    tried: tuple
+    rivals: tuple
+
+
+def no_path_pairs(skipped) -> list[tuple[str, str]]:
+    """(output, input) of the pairs :func:`select_pairs` skipped for having no path in the model."""
+    return [(o, i) for o, i, why in skipped if "no path" in why]
+
+
+def _log_misfit(model, theta, pairs) -> float:
+    """Sum over ``pairs`` of |ln(data/model)|^2 (phase wrapped): how far the model is from them."""
+    total = 0.0
+    for p in pairs:
+        T = model.frequency_response(theta, p.omega)[model.outputs.index(p.output), model.inputs.index(p.input)]
+        with np.errstate(all="ignore"):
+            d = (p.magnitude_db / 20.0 * np.log(10.0) - np.log(np.abs(T))) + 1j * np.angle(
+                np.exp(1j * np.deg2rad(p.phase_deg)) / T)
+        total += float(np.sum(np.abs(d) ** 2))
+    return total if np.isfinite(total) else np.inf
+
+
+def _candidate_table(table, where, name):
+    t = normalised(table)
+    if where == name and name in t["parameters"]:          # a fixed derivative: freed
+        t["parameters"][name] = {"value": float(t["parameters"][name]["value"])}
+    else:
+        add_entry(t, where, name)
+    return t
+
+
+def find_coupling(table: dict, origin: dict, fit: StateSpaceFit, frs, skipped, *, n_omega: int,
+                  progress=None) -> Coupling | None:
+    """The entry that best gives the no-path pairs of ``skipped`` a path, or None.
+
+    Parameters
+    ----------
+    table : dict
+        ``[state_space]`` table of ``fit`` (its parameters at the fitted values).
+    origin : dict
+        The case's own table (its starting values, for the refit).
+    fit : StateSpaceFit
+    frs : FrequencyResponseSet
+    skipped : list of (output, input, reason)
+        From :func:`select_pairs` on ``fit.model``.
+    n_omega : int
+        Fitting points per pair.
+    progress : callable, optional
+    """
+    from livesweep.ident.residual import _param_report, _restart
+
+    targets = no_path_pairs(skipped)
+    if not targets:
+        return None
+    model = fit.model
+    tried, kept = [], []
+    for name, _k, where in derivative_slots(table, model):
+        t = _candidate_table(table, where, name)
+        t0 = _restart(t, origin)
+        try:
+            m = StateSpaceModel.from_table(t0)
+            k = m.index(name)
+            th = np.array(m.initial, float)
+            th[k] = 1.0
+            probe = m.with_values(th)
+            pairs, _ = select_pairs(frs, probe, n_omega=n_omega)
+        except (ConfigError, np.linalg.LinAlgError, ValueError):
+            continue
+        new = [p for p in pairs if (p.output, p.input) in targets]
+        if not new:
+            continue                                  # gives none of them a path
+        starts = [(s * v) for v in START_GRID for s in (1.0, -1.0)]
+        costs = []
+        for v in starts:
+            th[k] = v
+            costs.append(_log_misfit(m, th, new))
+        th[k] = starts[int(np.argmin(costs))]
+        if progress:
+            progress(f"residual loop: a path for {', '.join(f'{o}/{i}' for o, i in targets)} through {where}")
+        try:
+            new_fit = fit_state_space(m.with_values(th), pairs, max_nfev=100)
+        except (ConfigError, np.linalg.LinAlgError, ValueError) as exc:
+            tried.append({"where": where, "cost_after": None, "reason": f"could not identify: {exc}"})
+            continue
+        (par,) = _param_report(new_fit, [name])
+        why = []
+        if not new_fit.converged:
+            why.append("fit did not converge")
+        if not (par["cramer_rao_pct"] is not None and par["cramer_rao_pct"] <= MAX_CRAMER_RAO_PCT):
+            why.append(f"{name} CR% {par['cramer_rao_pct']} > {MAX_CRAMER_RAO_PCT:g}")
+        if not (par["insensitivity_pct"] is not None and par["insensitivity_pct"] <= MAX_INSENSITIVITY_PCT):
+            why.append(f"{name} I% {par['insensitivity_pct']} > {MAX_INSENSITIVITY_PCT:g}")
+        if not new_fit.cost_average <= MAX_COST_AVERAGE:
+            why.append(f"J_ave {new_fit.cost_average:.1f} > {MAX_COST_AVERAGE:g}")
+        got = {"where": where, "cost_after": float(new_fit.cost_average), "reason": "; ".join(why) or "acceptable",
+               "parameter": par}
+        tried.append(got)
+        if not why:
+            kept.append((new_fit.cost_average, where, t0, new_fit, par, tuple(sorted({(p.output, p.input) for p in new}))))
+    if not kept:
+        return None
+    kept.sort(key=lambda x: x[0])
+    cost, where, t0, new_fit, par, pairs = kept[0]
+    rivals = tuple(w for c, w, *_ in kept[1:] if c <= RIVAL_COST_RATIO * cost)
+    t0 = copy.deepcopy(t0)
+    t0["parameters"][par["name"]] = {"value": float(par["value"])}
+    return Coupling(where, pairs, t0, new_fit, par, tuple(tried), rivals)
