@@ -328,7 +328,10 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
             if coupling.rivals:
                 effect["ambiguous_with"] = [{"kind": "missing_derivative", "where": w} for w in coupling.rivals]
             tried = tuple({"kind": "missing_derivative", "where": t["where"], "cost_after": t["cost_after"],
-                           "accepted": t["where"] == coupling.where, "reason": t["reason"],
+                           "accepted": t["where"] == coupling.where,
+                           "reason": ("kept: the lowest J_ave within the guidelines" if t["where"] == coupling.where else
+                                      f"within the guidelines, but J_ave above {coupling.where}'s"
+                                      if t["reason"] == "acceptable" else t["reason"]),
                            "parameters": [t["parameter"]] if "parameter" in t else []} for t in coupling.tried)
             # residuals on the pairs the model had before (the new ones had none to compare)
             steps.append(LoopStep((), tried, effect, cost_before, fit.cost_average, _ver_summary(ver_before),

@@ -297,8 +297,12 @@ def _residual(report: dict) -> str:
                         + "".join(f" with {e(w['kind'])} at {e(w['where'])}" for w in t.get("with", ()))
                         + f": J<sub>ave</sub> {_num(t.get('cost_after'), '.2f')}; {e(t['reason'])}</li>"
                         for t in st["tried"])
+        why = (f"The model had no path to the coherent pair(s) {e(', '.join(eff['gives_a_path_for']))} (skipped: no "
+               f"residual to screen); each absent entry that gives one was refitted on every pair, the new one "
+               f"included, and the lowest J<sub>ave</sub> within the guidelines kept."
+               if eff and eff.get("gives_a_path_for") else f"Strongest candidates (evidence, noise units): {e(cands)}")
         blocks.append(f"<h3>Step {k + 1}: {head}</h3><p>J<sub>ave</sub> {st['cost_before']:.2f} → "
-                      f"{st['cost_after']:.2f}{ver}. Strongest candidates (evidence, noise units): {e(cands)}</p>"
+                      f"{st['cost_after']:.2f}{ver}. {why}</p>"
                       + (f"<ul>{tried}</ul>" if tried else "") + _img(st.get("plot"), 1100, f"residual step {k + 1}"))
     if rl.get("parameter_units") and rl.get("augmented_case"):
         final = {p["name"]: p for e_ in (st["effect"] for st in rl["steps"] if st["effect"])
