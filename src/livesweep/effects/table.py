@@ -6,7 +6,7 @@ from __future__ import annotations
 import copy
 import re
 
-__all__ = ["normalised", "is_zero", "has_parameter", "fresh", "add_state", "add_parameter", "product",
+__all__ = ["restart_from", "normalised", "is_zero", "has_parameter", "fresh", "add_state", "add_parameter", "product",
            "add_entry", "route_input", "EFFECT_STATE_PREFIXES"]
 
 #: States the effects add (their equations are the effect's, not the vehicle's).
@@ -97,3 +97,13 @@ def route_input(t: dict, j: int, a: int, n0: int) -> None:
     for o in range(len(t["outputs"])):
         t["H"][o][a] = t["J"][o][j]
         t["J"][o][j] = "0"
+
+
+def restart_from(aug: dict, origin: dict) -> dict:
+    """``aug`` with the model's own parameters back at the case's starting values (``origin``'s), the
+    effects' parameters as they are."""
+    t = copy.deepcopy(aug)
+    for name, entry in origin.get("parameters", {}).items():
+        if name in t["parameters"]:
+            t["parameters"][name] = copy.deepcopy(entry)
+    return t

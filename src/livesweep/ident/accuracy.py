@@ -41,10 +41,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from livesweep.numbers import finite_or_none
 from livesweep.numbers import frozen_array as _frozen
 
 __all__ = ["Accuracy", "accuracy_from_jacobian", "MONTE_CARLO_SCATTER_OVER_CR", "MAX_CRAMER_RAO_PCT",
-           "MAX_INSENSITIVITY_PCT", "MAX_CORRELATION", "MAX_COST", "MAX_COST_AVERAGE"]
+           "parameter_report", "MAX_INSENSITIVITY_PCT", "MAX_CORRELATION", "MAX_COST", "MAX_COST_AVERAGE"]
 
 #: Observed scatter (std) of Monte-Carlo estimates divided by the mean raw Cramer-Rao bound, median
 #: over parameters (module docstring; XV-15 cruise simulator, 80 realisations).
@@ -150,3 +151,14 @@ def accuracy_from_jacobian(D, theta) -> Accuracy:
     corr = np.clip(corr, -1.0, 1.0)
     return Accuracy(_frozen(theta), _frozen(H), _frozen(cr), _frozen(ins), _frozen(_pct(cr, theta)),
                     _frozen(_pct(ins, theta)), _frozen(corr))
+
+
+def parameter_report(fit, names) -> list[dict]:
+    """Name, value, CR% and I% (3 decimals, None when not finite) and fixed flag of the fit's
+    parameters ``names``, as the residual loop reports them."""
+    out = []
+    for n in names:
+        q = fit.parameter(n)
+        out.append({"name": n, "value": float(q.value), "cramer_rao_pct": finite_or_none(q.cramer_rao_pct, 3),
+                    "insensitivity_pct": finite_or_none(q.insensitivity_pct, 3), "fixed": bool(q.fixed)})
+    return out

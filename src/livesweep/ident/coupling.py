@@ -19,9 +19,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from livesweep.effects.derivative import derivative_slots
-from livesweep.effects.table import add_entry, normalised
+from livesweep.effects.table import add_entry, normalised, restart_from
 from livesweep.errors import ConfigError
-from livesweep.ident.accuracy import MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT
+from livesweep.ident.accuracy import MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT, parameter_report
+from livesweep.ident.residual_space import model_misfit
 from livesweep.ident.state_space import StateSpaceFit, StateSpaceModel, fit_state_space, select_pairs
 
 __all__ = ["Coupling", "no_path_pairs", "find_coupling", "START_GRID", "RIVAL_COST_RATIO"]
@@ -69,14 +70,13 @@ def no_path_pairs(skipped) -> list[tuple[str, str]]:
 
 
 def _log_misfit(model, theta, pairs) -> float:
-    """Sum over ``pairs`` of |ln(data/model)|^2 (phase wrapped): how far the model is from them."""
+    """Sum over ``pairs`` of |ln(data/model)|^2 (magnitude in nepers, phase in rad): how far the
+    model is from them."""
     total = 0.0
     for p in pairs:
-        T = model.frequency_response(theta, p.omega)[model.outputs.index(p.output), model.inputs.index(p.input)]
         with np.errstate(all="ignore"):
-            d = (p.magnitude_db / 20.0 * np.log(10.0) - np.log(np.abs(T))) + 1j * np.angle(
-                np.exp(1j * np.deg2rad(p.phase_deg)) / T)
-        total += float(np.sum(np.abs(d) ** 2))
+            mag_db, ph_deg = model_misfit(model, theta, p)
+        total += float(np.sum((mag_db * (np.log(10.0) / 20.0)) ** 2 + np.deg2rad(ph_deg) ** 2))
     return total if np.isfinite(total) else np.inf
 
 
@@ -107,8 +107,6 @@ def find_coupling(table: dict, origin: dict, fit: StateSpaceFit, frs, skipped, *
         Fitting points per pair.
     progress : callable, optional
     """
-    from livesweep.ident.residual import _param_report, _restart
-
     targets = no_path_pairs(skipped)
     if not targets:
         return None
@@ -116,7 +114,7 @@ def find_coupling(table: dict, origin: dict, fit: StateSpaceFit, frs, skipped, *
     tried, kept = [], []
     for name, _k, where in derivative_slots(table, model):
         t = _candidate_table(table, where, name)
-        t0 = _restart(t, origin)
+        t0 = restart_from(t, origin)
         try:
             m = StateSpaceModel.from_table(t0)
             k = m.index(name)
@@ -142,7 +140,7 @@ def find_coupling(table: dict, origin: dict, fit: StateSpaceFit, frs, skipped, *
         except (ConfigError, np.linalg.LinAlgError, ValueError) as exc:
             tried.append({"where": where, "cost_after": None, "reason": f"could not identify: {exc}"})
             continue
-        (par,) = _param_report(new_fit, [name])
+        (par,) = parameter_report(new_fit, [name])
         why = []
         if not new_fit.converged:
             why.append("fit did not converge")
@@ -156,7 +154,8 @@ def find_coupling(table: dict, origin: dict, fit: StateSpaceFit, frs, skipped, *
                "parameter": par}
         tried.append(got)
         if not why:
-            kept.append((new_fit.cost_average, where, t0, new_fit, par, tuple(sorted({(p.output, p.input) for p in new}))))
+            gained = tuple(sorted({(p.output, p.input) for p in new}))
+            kept.append((new_fit.cost_average, where, t0, new_fit, par, gained))
     if not kept:
         return None
     kept.sort(key=lambda x: x[0])

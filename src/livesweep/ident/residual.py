@@ -39,9 +39,9 @@ from statistics import NormalDist
 import numpy as np
 
 from livesweep.effects import EFFECT_KINDS, SEARCHED_KINDS, Candidate
-from livesweep.effects.table import normalised
+from livesweep.effects.table import normalised, restart_from
 from livesweep.errors import ConfigError
-from livesweep.ident.accuracy import MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT
+from livesweep.ident.accuracy import MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT, parameter_report
 from livesweep.ident.residual_space import (PairResidual, ResidualSpace, band_of, pair_residuals,
                                             whitened_ss)
 from livesweep.ident.coupling import find_coupling, no_path_pairs
@@ -94,16 +94,6 @@ def table_with_fit(table: dict, fit: StateSpaceFit) -> dict:
     t = copy.deepcopy(table)
     t["parameters"] = {n: {"value": float(v), **({"fixed": True} if f else {})}
                        for n, v, f in zip(fit.model.parameters, fit.theta, fit.model.fixed)}
-    return t
-
-
-def _restart(aug: dict, origin: dict) -> dict:
-    """``aug`` with the model's own parameters back at the case's starting values (``origin``'s), the
-    effects' parameters as they are."""
-    t = copy.deepcopy(aug)
-    for name, entry in origin.get("parameters", {}).items():
-        if name in t["parameters"]:
-            t["parameters"][name] = copy.deepcopy(entry)
     return t
 
 
@@ -216,19 +206,6 @@ class ResidualLoop:
                 "criterion": self.criterion}
 
 
-def _param_report(fit, names):
-    out = []
-    for n in names:
-        q = fit.parameter(n)
-        out.append({"name": n, "value": float(q.value), "cramer_rao_pct": _finite(q.cramer_rao_pct),
-                    "insensitivity_pct": _finite(q.insensitivity_pct), "fixed": bool(q.fixed)})
-    return out
-
-
-def _finite(x):
-    return finite_or_none(x, 3)
-
-
 @dataclass
 class _Judge:
     """What every re-identification in one loop is judged against."""
@@ -329,8 +306,8 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                 effect["ambiguous_with"] = [{"kind": "missing_derivative", "where": w} for w in coupling.rivals]
             tried = tuple({"kind": "missing_derivative", "where": t["where"], "cost_after": t["cost_after"],
                            "accepted": t["where"] == coupling.where,
-                           "reason": ("kept: the lowest J_ave within the guidelines" if t["where"] == coupling.where else
-                                      f"within the guidelines, but J_ave above {coupling.where}'s"
+                           "reason": ("kept: the lowest J_ave within the guidelines" if t["where"] == coupling.where
+                                      else f"within the guidelines, but J_ave above {coupling.where}'s"
                                       if t["reason"] == "acceptable" else t["reason"]),
                            "parameters": [t["parameter"]] if "parameter" in t else []} for t in coupling.tried)
             # residuals on the pairs the model had before (the new ones had none to compare)
@@ -604,7 +581,8 @@ def _ver_summary(v):
     for x in vs:
         for o in x.outputs:
             tic[o.name] = max(tic.get(o.name, 0.0), float(o.tic))
-    return {"j_rms": _finite(j), "tic": {k: _finite(t) for k, t in tic.items()}, "passed": all(x.passed for x in vs)}
+    return {"j_rms": finite_or_none(j, 3), "tic": {k: finite_or_none(t, 3) for k, t in tic.items()},
+            "passed": all(x.passed for x in vs)}
 
 
 def _verification_change(before, after, alpha: float = FALSE_ALARM):
@@ -728,7 +706,7 @@ def _try(table, cand, fit, judge, ss_before, ver_before):
         if not new_fit.converged and judge.origin is not None:
             # the model's derivatives had bent to make up for the missing effect and the refit from
             # them is stuck: start them again where the case starts them (a second start)
-            again = fit_state_space(StateSpaceModel.from_table(_restart(aug, judge.origin)), pairs, max_nfev=100)
+            again = fit_state_space(StateSpaceModel.from_table(restart_from(aug, judge.origin)), pairs, max_nfev=100)
             if again.converged or again.cost_average < new_fit.cost_average:
                 new_fit = again
     except (ConfigError, np.linalg.LinAlgError, ValueError) as exc:
@@ -738,7 +716,7 @@ def _try(table, cand, fit, judge, ss_before, ver_before):
         res_after = tuple(pair_residuals(new_fit.model, new_fit.theta, pairs, frs))
         ss_after = whitened_ss(res_after)
         sig = judge.test(ss_before, ss_after, len(new), n_model)
-        params = _param_report(new_fit, new)
+        params = parameter_report(new_fit, new)
         ver_after = verify(new_fit.model, new_fit.theta) if verify else None
         change = _verification_change(ver_before, ver_after, judge.alpha)
         shape = []                                    # the effect's shape, whatever its parameters' accuracy

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["EPS_FLOOR", "PairResidual", "pair_residuals", "ResidualSpace", "whitened_ss", "band_of"]
+__all__ = ["EPS_FLOOR", "PairResidual", "model_misfit", "pair_residuals", "ResidualSpace", "whitened_ss", "band_of"]
 
 EPS_FLOOR = 0.02
 _DB = 20.0 / math.log(10.0)
@@ -65,6 +65,15 @@ def _sigma(frs, pair):
     return _DB * eps, _DEG * eps
 
 
+def model_misfit(model, theta, pair) -> tuple[np.ndarray, np.ndarray]:
+    """Data minus model on one pair at its fitting points: magnitude [dB] and phase [deg, wrapped
+    to (-180, 180]] (infinite magnitude where the model's response is zero)."""
+    T = model.frequency_response(theta, pair.omega)[model.outputs.index(pair.output), model.inputs.index(pair.input)]
+    mag = pair.magnitude_db - _DB * np.log(np.abs(T))
+    ph = np.angle(np.exp(1j * np.deg2rad(pair.phase_deg)) / T, deg=True)
+    return mag, ph
+
+
 def pair_residuals(model: StateSpaceModel, theta, pairs, frs) -> list[PairResidual]:
     """Data minus model for every fitted pair, with the data's random error.
 
@@ -80,9 +89,7 @@ def pair_residuals(model: StateSpaceModel, theta, pairs, frs) -> list[PairResidu
     """
     out = []
     for p in pairs:
-        T = model.frequency_response(theta, p.omega)[model.outputs.index(p.output), model.inputs.index(p.input)]
-        mag = p.magnitude_db - _DB * np.log(np.abs(T))
-        ph = np.angle(np.exp(1j * np.deg2rad(p.phase_deg)) / T, deg=True)
+        mag, ph = model_misfit(model, theta, p)
         sdb, sdeg = _sigma(frs, p)
         out.append(PairResidual(p.output, p.input, p.omega, mag, ph, sdb, sdeg))
     return out
@@ -138,12 +145,7 @@ class ResidualSpace:
         """Evidence of moving to ``model`` at ``theta`` (the space's model with a parameter changed
         or added): the drop of the whitened sum of squares from the exact residual there (not
         linearised in the change), after the space's model parameters re-adjust linearly."""
-        parts = []
-        for p in self.pairs:
-            T = model.frequency_response(theta, p.omega)[model.outputs.index(p.output), model.inputs.index(p.input)]
-            mag = p.magnitude_db - _DB * np.log(np.abs(T))
-            ph = np.angle(np.exp(1j * np.deg2rad(p.phase_deg)) / T, deg=True)
-            parts.append(np.concatenate([mag, ph]))
+        parts = [np.concatenate(model_misfit(model, theta, p)) for p in self.pairs]
         pr = self.project(np.concatenate(parts) / self.sig)
         return self.base - float(pr @ pr)
 
