@@ -134,6 +134,8 @@ def test_undeclared_effect_is_found_identified_and_halves_the_cost(name):
     assert loop.fit.cost_average <= 0.5 * first.cost_before
     assert first.verification_after["j_rms"] <= first.verification_before["j_rms"] * 1.05
     assert loop.steps[-1].effect is None and loop.conclusion.startswith("added")
+    # a scale factor added is not also reported as one the data cannot show
+    assert all((x["kind"], x["where"]) != (kind, where) for x in loop.limits)
 
 
 def test_an_input_logged_late_is_found_as_its_sensor_skew():

@@ -434,6 +434,8 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
         conclusion = "residual above noise, but no candidate effect passed the acceptance tests"
     else:
         conclusion = "nothing to add: residual within noise"
+    # a scale factor the loop added absorbs its own place's scale error: not a limit of the data
+    limits = [x for x in limits if (x["kind"], x["where"]) not in found]
     if limits:
         conclusion += ("; scale errors these data cannot show (the derivatives absorb them): "
                        + ", ".join(f"{x['where']} " + ("any size" if x["smallest_detectable_pct"] >= 100 else
