@@ -25,8 +25,9 @@ no more than they would prefer an effect to nothing are reported as hard to tell
 pair is kept only if each partner is significant on top of the other alone. When the fit is
 inadequate (J_ave above the guideline, or a whitened mean square above ``NOISE_INFLATION``) the
 screen underrates what refits explain: the best-ranked are refitted whatever their screening test
-and, if none is accepted, every missing derivative once. The loop repeats until nothing
-significant remains or ``max_steps``.
+and, if none is accepted, every missing derivative once. A coherent pair the model has no path
+for (no residual in dB to screen) is first given one (:mod:`livesweep.ident.coupling`). The loop
+repeats until nothing significant remains or ``max_steps``.
 """
 
 from __future__ import annotations
@@ -42,9 +43,9 @@ from livesweep.effects import EFFECT_KINDS, SEARCHED_KINDS, Candidate
 from livesweep.effects.table import normalised, restart_from
 from livesweep.errors import ConfigError
 from livesweep.ident.accuracy import MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT, parameter_report
+from livesweep.ident.coupling import find_coupling, no_path_pairs
 from livesweep.ident.residual_space import (PairResidual, ResidualSpace, band_of, pair_residuals,
                                             whitened_ss)
-from livesweep.ident.coupling import find_coupling, no_path_pairs
 from livesweep.ident.selection import (FALSE_ALARM, NOISE_INFLATION, effective_points, indistinguishable, prefers,
                                        significance)
 from livesweep.ident.state_space import StateSpaceFit, StateSpaceModel, fit_state_space
