@@ -290,7 +290,7 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
         raise ConfigError("residual loop: no pair of the model has usable coherence")
     fit = fit_state_space(fit.model.with_values(fit.theta), pairs)
     origin, table = table, table_with_fit(table, fit)
-    steps, n_fits = [], 1
+    steps, n_fits, ver = [], 1, None
     if max_steps > 0 and no_path_pairs(skipped):
         # coherent pairs the model has no path for: no residual in dB, so no screen sees them
         coupling = find_coupling(table, origin, fit, frs, skipped, n_omega=n_omega, progress=progress)
@@ -311,14 +311,16 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                                       else f"within the guidelines, but J_ave above {coupling.where}'s"
                                       if t["reason"] == "acceptable" else t["reason"]),
                            "parameters": [t["parameter"]] if "parameter" in t else []} for t in coupling.tried)
+            ver = verify(fit.model, fit.theta) if verify else None
             # residuals on the pairs the model had before (the new ones had none to compare)
             steps.append(LoopStep((), tried, effect, cost_before, fit.cost_average, _ver_summary(ver_before),
-                                  _ver_summary(verify(fit.model, fit.theta) if verify else None), before,
+                                  _ver_summary(ver), before,
                                   tuple(pair_residuals(fit.model, fit.theta, old_pairs, frs))))
     judge = _Judge(pairs, frs, verify, effective_points(pairs, getattr(frs, "settings", {})), float(false_alarm),
                    origin=origin)
     unexplained = []
-    ver = verify(fit.model, fit.theta) if verify else None
+    if ver is None and verify:
+        ver = verify(fit.model, fit.theta)
     before = tuple(pair_residuals(fit.model, fit.theta, pairs, frs))
     for r in before:
         if not (np.all(np.isfinite(r.magnitude_db)) and np.all(np.isfinite(r.phase_deg))):
