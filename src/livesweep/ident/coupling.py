@@ -29,6 +29,7 @@ __all__ = ["Coupling", "no_path_pairs", "find_coupling", "START_GRID", "RIVAL_CO
 
 #: Magnitudes at which a new entry's starting value is tried, both signs (units of the entry).
 START_GRID = 10.0 ** np.arange(-4.0, 2.01, 0.25)
+_STARTS = np.concatenate([START_GRID, -START_GRID])
 #: Entries whose refit's J_ave is within this ratio of the best one's are reported as rivals.
 RIVAL_COST_RATIO = 1.10
 
@@ -122,17 +123,17 @@ def find_coupling(table: dict, origin: dict, fit: StateSpaceFit, frs, skipped, *
             th[k] = 1.0
             probe = m.with_values(th)
             pairs, _ = select_pairs(frs, probe, n_omega=n_omega)
-        except (ConfigError, np.linalg.LinAlgError, ValueError):
+        except (ConfigError, np.linalg.LinAlgError, ValueError) as exc:
+            tried.append({"where": where, "cost_after": None, "reason": f"could not build the model: {exc}"})
             continue
         new = [p for p in pairs if (p.output, p.input) in targets]
         if not new:
             continue                                  # gives none of them a path
-        starts = [(s * v) for v in START_GRID for s in (1.0, -1.0)]
         costs = []
-        for v in starts:
+        for v in _STARTS:
             th[k] = v
             costs.append(_log_misfit(m, th, new))
-        th[k] = starts[int(np.argmin(costs))]
+        th[k] = _STARTS[int(np.argmin(costs))]
         if progress:
             progress(f"residual loop: a path for {', '.join(f'{o}/{i}' for o, i in targets)} through {where}")
         try:
