@@ -56,7 +56,7 @@ SWEEP = dict(axes=IN, repeats=2, omega_min_rad_s=1.0, omega_max_rad_s=60.0, dura
              amplitudes={"roll_cmd": 0.1, "pitch_cmd": 0.1}, turbulence=False, seed=1)
 RATE_HZ = 200.0
 BAND = (1.0, 60.0)
-WINDOWS = (2.0, 4.0, 8.0, 14.0, 20.0)
+WINDOWS = None        # the case file sets none: the method's defaults for the record, 2.1 s to half of it
 
 
 def d_roll(s):
@@ -181,12 +181,11 @@ def _fit(frs, table=None):
     return fit_state_space(model, pairs, skipped_pairs=skipped)
 
 
-# Rotor drag (Yv, Xu) reaches the fit only through ax and ay, whose coherent band is 1.5-5 rad/s;
-# there ax/pitch_cmd and ay/roll_cmd fall as 1/omega^2 and the composite estimate (windows of
-# 8-20 s, 0.5-1 rad/s resolution) reads their magnitude 0.2-0.4 dB high even on noise-free data,
-# which Yv and Xu take on one for one (5-9 % over eight noise seeds, up to 3.4 CR). They get a 12 %
-# allowance; every other parameter must lie within 3 Cramer-Rao bounds.
-BIAS_ALLOWANCE = {"Yv": 0.12, "Xu": 0.12}
+# Rotor drag (Yv, Xu) reaches the fit only through ax and ay, whose coherent band is 1.5-5 rad/s,
+# where ax/pitch_cmd and ay/roll_cmd fall as 1/omega^2. With windows of only 2-20 s the composite
+# read their magnitude 0.2-0.4 dB high even on noise-free data and Yv, Xu came out 2.3-2.6
+# Cramer-Rao bounds off on every seed; with the method's windows (up to half the record, 194 s)
+# every parameter lies within 1.3 bounds (seeds 1-4), so no parameter gets an allowance.
 
 
 def test_the_case_identifies_the_model_back_from_a_simulated_sweep():
@@ -207,8 +206,7 @@ def test_the_case_identifies_the_model_back_from_a_simulated_sweep():
     for p in fit.parameters:
         t = truth[p.name]
         assert p.cramer_rao_pct < 10.0, p
-        allowed = max(3.0 * p.cramer_rao, BIAS_ALLOWANCE.get(p.name, 0.0) * abs(t))
-        assert abs(p.value - t) <= allowed, (p, t)
+        assert abs(p.value - t) <= 3.0 * p.cramer_rao, (p, t)
     assert_roots_close(fit.eigenvalues, m.eigenvalues(), rtol=0.15)
 
 
@@ -224,7 +222,7 @@ def test_residual_loop_on_clean_quad_data_adds_nothing():
 def test_a_coupling_the_model_lacks_is_given_to_the_coherent_pair_it_had_no_path_for():
     """The case without Lpitch (roll due to pitch command): the model's p/pitch_cmd is zero by its
     structure while the data are coherent there, so the pair is skipped and no residual screen
-    sees it. The loop tries each absent entry that gives the pair a path, refits on every pair,
+    sees it (nor phi/pitch_cmd's). The loop tries each absent entry that gives the pair a path, refits on every pair,
     and keeps G[p][pitch_cmd] at the simulator's Lpitch within 3 Cramer-Rao bounds; the pair is
     then fitted and J_ave stays within the clean fit's guideline."""
     from livesweep.ident.residual import run_residual_loop
@@ -238,7 +236,10 @@ def test_a_coupling_the_model_lacks_is_given_to_the_coherent_pair_it_had_no_path
     loop = run_residual_loop(table, fit, frs)
     first = loop.added[0]
     assert (first["kind"], first["where"]) == ("missing_derivative", "G[p][pitch_cmd]")
-    assert first["gives_a_path_for"] == ["p/pitch_cmd"]
+    # without Lpitch nothing links pitch_cmd to the roll axis (phi' = p), so phi/pitch_cmd may be
+    # coherent and path-less too; nothing else may be named
+    assert "p/pitch_cmd" in first["gives_a_path_for"]
+    assert set(first["gives_a_path_for"]) <= {"p/pitch_cmd", "phi/pitch_cmd"}
     (p,) = first["parameters"]
     assert abs(p["value"] - D["Lpitch"]) <= 3 * p["cramer_rao_pct"] / 100 * abs(p["value"]), p
     assert ("p", "pitch_cmd") in {(o, i) for o, i, _ in loop.fit.cost_pairs}
