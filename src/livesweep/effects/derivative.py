@@ -27,16 +27,28 @@ def _dynamic_rows(table, params) -> list[int]:
 
 def derivative_slots(table, model):
     """(parameter name, index or None, entry ``"F[i][j]"``) of the fixed parameters (delays and
-    skews aside) and of the absent entries in the dynamic rows of F and G."""
+    skews aside) and of the absent entries in the dynamic rows of F and G.
+
+    An absent entry in the column of a kinematic state (a vehicle state whose row holds no
+    parameter: phi' = p, theta' = q) is not a slot. Forces and moments do not depend on the
+    attitude, which enters the force equations only through gravity, a known constant; and in a
+    response estimated without references a pilot's attitude feedback biases the estimate in just
+    that shape (a hover log with turbulence gains a "roll moment due to bank angle" F[p][phi] that
+    halves J_ave with no effect in it).
+    """
     params = set(table.get("parameters", {}))
     slots = []
     for n, f in zip(model.parameters, model.fixed):
         if f and not n.startswith(("tau", "skew")):
             slots.append((n, model.index(n), n))
     states, inputs = table["states"], table["inputs"]
-    for i in _dynamic_rows(table, params):
+    dynamic = _dynamic_rows(table, params)
+    kinematic = {j for j, s in enumerate(states) if j not in dynamic and not s.startswith(EFFECT_STATE_PREFIXES)}
+    for i in dynamic:
         for key, cols in (("F", states), ("G", inputs)):
             for j, e in enumerate(table[key][i]):
+                if key == "F" and j in kinematic:
+                    continue
                 if is_zero(e) and not (key == "F" and states[j].startswith(EFFECT_STATE_PREFIXES)):
                     name = fresh(f"{key}_{states[i]}_{cols[j]}", params)
                     slots.append((name, None, f"{key}[{states[i]}][{cols[j]}]"))
