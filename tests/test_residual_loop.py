@@ -351,7 +351,6 @@ def _hover(effects, seed, edit=None):
     return frs, table, fit_state_space(model, pairs)
 
 
-
 def test_a_pilot_s_attitude_feedback_is_not_taken_for_a_moment_due_to_attitude():
     """Hover in turbulence, nothing injected (seed 805). Without references the pilot's feedback of
     phi through da biases the estimate in the shape of a roll moment due to bank angle: offered
@@ -370,6 +369,7 @@ def test_a_pilot_s_attitude_feedback_is_not_taken_for_a_moment_due_to_attitude()
     assert [w for _, _, w in derivative_slots(dropped, StateSpaceModel.from_table(dropped))] == ["F[p][v]"]
     loop = run_residual_loop(table, fit, frs)
     assert loop.added == (), loop.conclusion
+
 
 def test_an_effect_that_bends_the_derivatives_beyond_the_cost_guideline_is_still_found():
     """Hover, a 5 rad/s second-order actuator on da (zeta 0.6): the derivatives bend so far to make

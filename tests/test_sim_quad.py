@@ -183,7 +183,7 @@ def _fit(frs, table=None):
 
 # Rotor drag (Yv, Xu) reaches the fit only through ax and ay, whose coherent band is 1.5-5 rad/s,
 # where ax/pitch_cmd and ay/roll_cmd fall as 1/omega^2. With windows of only 2-20 s the composite
-# read their magnitude 0.2-0.4 dB high even on noise-free data and Yv, Xu came out 2.3-2.6
+# read ay/roll_cmd 0.5-2.6 dB high at 1.6-3 rad/s even on noise-free data and Yv, Xu came out 2.3-2.6
 # Cramer-Rao bounds off on every seed; with the method's windows (up to half the record, 194 s)
 # every parameter lies within 1.3 bounds (seeds 1-4), so no parameter gets an allowance.
 
@@ -222,9 +222,9 @@ def test_residual_loop_on_clean_quad_data_adds_nothing():
 def test_a_coupling_the_model_lacks_is_given_to_the_coherent_pair_it_had_no_path_for():
     """The case without Lpitch (roll due to pitch command): the model's p/pitch_cmd is zero by its
     structure while the data are coherent there, so the pair is skipped and no residual screen
-    sees it (nor phi/pitch_cmd's). The loop tries each absent entry that gives the pair a path, refits on every pair,
-    and keeps G[p][pitch_cmd] at the simulator's Lpitch within 3 Cramer-Rao bounds; the pair is
-    then fitted and J_ave stays within the clean fit's guideline."""
+    sees it (nor phi/pitch_cmd's). The loop tries each absent entry that gives the pair a path,
+    refits on every pair, and keeps G[p][pitch_cmd] at the simulator's Lpitch within 3 Cramer-Rao
+    bounds; the pair is then fitted and J_ave stays within the clean fit's guideline."""
     from livesweep.ident.residual import run_residual_loop
 
     table = _case_table()
