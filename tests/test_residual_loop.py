@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from livesweep.config import load_case
-from livesweep.ident.residual import (Candidate, augment_table, diagnose, run_residual_loop,
+from livesweep.ident.residual import (Candidate, augment_table, diagnose, effect_text, run_residual_loop,
                                       table_with_fit)
 from livesweep.ident.state_space import StateSpaceModel, fit_state_space, select_pairs
 from livesweep.ident.verify import verify
@@ -654,3 +654,45 @@ def test_a_control_derivative_the_fit_made_up_for_is_found_by_refitting_every_mi
     truth = xv15_hover().derivatives["Nda"]
     assert abs(p["value"] - truth) <= 3 * p["cramer_rao_pct"] / 100 * abs(p["value"]), (p, truth)
     assert loop.fit.cost_average <= 0.5 * first.cost_before
+
+
+def test_a_control_path_effect_the_screen_misplaces_is_found_by_refitting_every_one():
+    """Hover, a 7 rad/s second-order actuator on dr (zeta 0.5). The fit bends the yaw derivatives
+    to make up for it, and about that fit the screen sees a 0.2 rad/s resonance and a 10 s lag, not
+    the actuator. The loop, seeing the lack of fit, refits every control-path effect once and adds
+    the actuator: both parameters within 3 Cramer-Rao bounds of the injection, the cost at least
+    halved, nothing else added. (The rule was set on development hover seed 73 and held-out-8 seed
+    903 of benchmarks/residual_confusion.py; this seed was not looked at.)"""
+    frs, table, fit = _hover([make_effect("actuator_second_order", input="dr", omega_rad_s=7.0, zeta=0.5)], seed=85)
+    loop = run_residual_loop(table, fit, frs)
+    first = loop.steps[0]
+    screened = next(c for c in first.candidates if (c.kind, c.where) == ("actuator_second_order", "dr"))
+    assert first.candidates.index(screened) >= 3          # the screen alone would not have refitted it
+    assert [(e["kind"], e["where"]) for e in loop.added] == [("actuator_second_order", "dr")], loop.conclusion
+    p = {x["name"]: x for x in loop.added[0]["parameters"]}
+    for name, truth in (("wn_act_dr", 7.0), ("zeta_act_dr", 0.5)):
+        assert abs(p[name]["value"] - truth) <= 3 * p[name]["cramer_rao_pct"] / 100 * p[name]["value"], p[name]
+    assert loop.fit.cost_average <= 0.5 * first.cost_before
+
+
+SKEW_SEED = 62     # one where the bound lands between the guideline and a third (61: 18.6 %, 64: evidence < 2x needed)
+
+
+def test_an_effect_s_only_parameter_three_bounds_from_zero_is_kept_and_said_to_be_poorly_determined():
+    """Hover, a 30 ms skew on phi (missed on held-out-8 seed 906 of
+    benchmarks/residual_confusion.py): clearly there by its F-test, its only parameter at a
+    Cramer-Rao bound above the 20 % guideline but below a third of its value (three bounds from
+    zero). The loop adds it with the value fixed and says so, and the value is within 3 of those
+    bounds of the injection."""
+    from livesweep.ident.accuracy import MAX_CRAMER_RAO_PCT
+    from livesweep.ident.residual import ONLY_PARAMETER_CR_PCT
+
+    frs, table, fit = _hover([make_effect("sensor_skew", output="phi", delay_s=0.03)], seed=SKEW_SEED)
+    loop = run_residual_loop(table, fit, frs)
+    assert [(e["kind"], e["where"]) for e in loop.added] == [("sensor_skew", "phi")], loop.conclusion
+    (skew,) = loop.added[0]["parameters"]
+    assert skew["fixed"]
+    (why,) = next(t for t in loop.steps[0].tried if t["accepted"])["fixed"]
+    assert MAX_CRAMER_RAO_PCT < why["cramer_rao_pct"] <= ONLY_PARAMETER_CR_PCT
+    assert abs(skew["value"] - 0.03) <= 3 * why["cramer_rao_pct"] / 100 * skew["value"]
+    assert "poorly determined" in effect_text(loop.added[0])

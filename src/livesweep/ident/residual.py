@@ -25,9 +25,10 @@ no more than they would prefer an effect to nothing are reported as hard to tell
 pair is kept only if each partner is significant on top of the other alone. When the fit is
 inadequate (J_ave above the guideline, or a whitened mean square above ``NOISE_INFLATION``) the
 screen underrates what refits explain: the best-ranked are refitted whatever their screening test
-and, if none is accepted, every missing derivative once. A coherent pair the model has no path
-for (no residual in dB to screen) is first given one (:mod:`livesweep.ident.coupling`). The loop
-repeats until nothing significant remains or ``max_steps``.
+and, if none explains the residual (:func:`_explained`), every missing derivative and every
+control-path effect once. A coherent pair the model has no path for (no residual in dB to
+screen) is first given one (:mod:`livesweep.ident.coupling`). The loop repeats until nothing
+significant remains or ``max_steps``.
 """
 
 from __future__ import annotations
@@ -52,8 +53,8 @@ from livesweep.ident.state_space import StateSpaceFit, StateSpaceModel, fit_stat
 from livesweep.numbers import finite_or_none
 
 __all__ = ["KINDS", "FALSE_ALARM", "MIN_RELATIVE_COST_DROP", "FIXABLE_PREFIXES", "FREQUENCY_PREFIXES",
-           "CLEAR_EVIDENCE_FACTOR", "PairResidual", "Candidate", "LoopStep", "ResidualLoop", "pair_residuals",
-           "diagnose", "augment_table", "run_residual_loop", "table_with_fit", "effect_text"]
+           "CLEAR_EVIDENCE_FACTOR", "ONLY_PARAMETER_CR_PCT", "PARTIAL", "PairResidual", "Candidate", "LoopStep",
+           "ResidualLoop", "pair_residuals", "diagnose", "augment_table", "run_residual_loop", "table_with_fit", "effect_text"]
 
 #: The kinds the loop looks for (the catalogue's searched kinds).
 KINDS = SEARCHED_KINDS
@@ -366,11 +367,17 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                 if len(singles) >= n_refit:
                     break
                 single(c)
-            if inadequate and not accepted:
+            if inadequate and not _explained(tried):
                 # a derivative the fit compensated elsewhere screens far below what its refit
                 # (restarted from the case's values) explains: each is re-identified once
                 for c in ranked:
                     if c.kind == "missing_derivative":
+                        single(c)
+            if inadequate and not _explained(tried):
+                # so does a control-path effect (a 6 rad/s second-order actuator on a yaw axis the
+                # fit bent its derivatives to: screened as 0.2 rad/s notches and 10 s lags)
+                for c in ranked:
+                    if EFFECT_KINDS[c.kind].acts_on == "input":
                         single(c)
             leader = max(tried, key=lambda t: t.get("evidence_after", -np.inf), default=None)
             duo = []
@@ -397,7 +404,7 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
             # An accepted candidate that explains less than half of what the best-explaining one
             # does (even if that one failed a guideline) is a partial explanation, not the effect.
             top = max((t.get("evidence_after", -np.inf) for t in tried), default=-np.inf)
-            if best is not None and best[0]["evidence_after"] < 0.5 * top:
+            if best is not None and best[0]["evidence_after"] < PARTIAL * top:
                 best[0]["accepted"] = False
                 best[0]["reason"] = (f"explains {best[0]['evidence_after']:.0f}, less than half of the best candidate's "
                                      f"{top:.0f}: a partial explanation")
@@ -447,6 +454,18 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
     criterion = {"false_alarm": judge.alpha, "effective_points": round(judge.n_points, 1),
                  "noise_inflation": NOISE_INFLATION}
     return ResidualLoop(tuple(steps), table, fit, tuple(unexplained), conclusion, n_fits, tuple(limits), criterion)
+
+
+#: An accepted effect that explains less than this fraction of the whitened residual drop the
+#: best-explaining refit gives (accepted or not) is a partial explanation, not the effect.
+PARTIAL = 0.5
+
+
+def _explained(tried) -> bool:
+    """Whether some accepted refit in ``tried`` explains the residual, not just part of it
+    (:data:`PARTIAL`)."""
+    top = max((t.get("evidence_after", -np.inf) for t in tried), default=-np.inf)
+    return any(t["accepted"] and t["evidence_after"] >= PARTIAL * top for t in tried)
 
 
 def effect_text(effect: dict) -> str:
@@ -646,10 +665,15 @@ def _guideline_failures(params) -> list[str]:
 #: An effect whose parameter is fixed must be clearly there: its whitened residual drop at least
 #: this many times what its F-test needs. At most one parameter is fixed per effect.
 CLEAR_EVIDENCE_FACTOR = 2.0
-#: Parameters of an effect that may be fixed at their fitted value when poorly determined: the
-#: shape parameters (a damping, a notch's depth or a mode's gain), never the frequency or the delay
-#: that places the effect (a frequency that is not determined means the effect is not there).
+#: Parameters of an effect with several that may be fixed at their fitted value when poorly
+#: determined: the shape parameters (a damping, a notch's depth or a mode's gain), never the
+#: frequency that places the effect (a frequency that is not determined means the effect is not there).
 FIXABLE_PREFIXES = ("zeta_", "depth_")
+#: An effect's only parameter may miss the accuracy guidelines and be fixed at its fitted value
+#: when its Cramer-Rao bound is at most this [%] of its value: three bounds from zero, the
+#: parameter is there, as the effect's F-test (at :data:`CLEAR_EVIDENCE_FACTOR`) says the
+#: effect is; only its value is poorly determined, and the report says so.
+ONLY_PARAMETER_CR_PCT = 100.0 / 3.0
 #: Parameters that place an effect in frequency [rad/s]: fixing another of its parameters needs
 #: this one inside the fitted band (a "notch" at 25 rad/s fitted to 0.3-20 rad/s data is a lag in
 #: disguise, not a notch whose depth the data could not pin down).
@@ -661,9 +685,10 @@ def _worst(params):
 
     The shape parameter (:data:`FIXABLE_PREFIXES`) that misses the guidelines by most, relative to
     its limit, when only shape parameters miss them and another parameter stays free; or an
-    effect's only parameter when it misses only the insensitivity guideline (its Cramer-Rao bound
-    meets its own: jointly well determined, the cost merely flat in it alone, e.g. a 25 ms skew on
-    a noisy accelerometer). Nothing when a parameter that places the effect is poorly determined.
+    effect's only parameter when its Cramer-Rao bound is within :data:`ONLY_PARAMETER_CR_PCT`
+    (e.g. a 25 ms skew on a noisy accelerometer, the cost flat in it alone; a 30 ms skew on a
+    hover attitude at CR 25 %). Nothing when a parameter that places the effect is poorly
+    determined.
     """
     def excess(p):
         cr, ins = p["cramer_rao_pct"], p["insensitivity_pct"]
@@ -675,7 +700,7 @@ def _worst(params):
         return None
     if len(free) > 1 and all(p["name"].startswith(FIXABLE_PREFIXES) for p in bad):
         return max(bad, key=excess)
-    if len(free) == 1 and bad[0]["cramer_rao_pct"] is not None and bad[0]["cramer_rao_pct"] <= MAX_CRAMER_RAO_PCT:
+    if len(free) == 1 and bad[0]["cramer_rao_pct"] is not None and bad[0]["cramer_rao_pct"] <= ONLY_PARAMETER_CR_PCT:
         return bad[0]
     return None
 
