@@ -948,9 +948,11 @@ HELD_OUT_8_CLEAN = ([Case(f"clean hover seed {s}", "hover", s) for s in range(92
 # Written at stop 27, before the change that re-identifies every control-path effect once when
 # the fit is inadequate was final, and before anything was run on it. Run once.
 HELD_OUT_9 = [
-    Case("hover 2nd-order 5 rad/s zeta 0.7 da", "hover", 1001,
-         (_e("actuator_second_order", input="da", omega_rad_s=5.0, zeta=0.7),), {("actuator_second_order", "da")},
-         {"wn_act_da": 5.0, "zeta_act_da": 0.7}),
+    # first written at 5 rad/s: the simulated pilot's roll loop diverged with it (found before any
+    # result was printed, by simulating the set's cases alone)
+    Case("hover 2nd-order 8 rad/s zeta 0.7 da", "hover", 1001,
+         (_e("actuator_second_order", input="da", omega_rad_s=8.0, zeta=0.7),), {("actuator_second_order", "da")},
+         {"wn_act_da": 8.0, "zeta_act_da": 0.7}),
     Case("hover 2nd-order 10 rad/s zeta 0.4 dr", "hover", 1002,
          (_e("actuator_second_order", input="dr", omega_rad_s=10.0, zeta=0.4),), {("actuator_second_order", "dr")},
          {"wn_act_dr": 10.0, "zeta_act_dr": 0.4}),
