@@ -41,6 +41,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from livesweep.errors import ConfigError  # noqa: E402
 from livesweep.effects import make_effect  # noqa: E402
 from livesweep.ident.residual import run_residual_loop  # noqa: E402
 from livesweep.ident.state_space import StateSpaceModel, fit_state_space, select_pairs  # noqa: E402
@@ -1061,6 +1062,16 @@ def _summary(results, clean):
     return ok, named, conf
 
 
+def _run_or_say_why(case: Case) -> dict:
+    """:func:`run_case`, or ``{"name", "error"}`` when the case cannot be run (a simulation that
+    diverges: an effect that destabilises the simulated pilot's loop), so one bad case does not
+    stop the set; such cases are listed and left out of the counts."""
+    try:
+        return run_case(case)
+    except ConfigError as exc:
+        return {"name": case.name, "error": str(exc)}
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--calibrate", action="store_true", help="run the clean calibration set")
@@ -1096,7 +1107,11 @@ def main(argv=None) -> None:
         cases = [c for c in cases if a.only == c.airframe or a.only in c.name]
     t0 = time.perf_counter()
     with ProcessPoolExecutor(a.j) as ex:
-        results = list(ex.map(run_case, cases))
+        results = list(ex.map(_run_or_say_why, cases))
+    failed = [r for r in results if "error" in r]
+    results = [r for r in results if "error" not in r]
+    for r in failed:
+        print(f"{r['name']:42s} NOT RUN: {r['error']}")
     for r in results:
         within = ", ".join(f"{n} {v:.4g} (truth {t:.4g}, CR {cr}%){'' if w else ' OUTSIDE 3 CR'}"
                            for n, v, t, cr, w in r["within"])
@@ -1108,7 +1123,8 @@ def main(argv=None) -> None:
     effect = [r for r in results if r["expect"]]
     clean = [r for r in results if not r["expect"]]
     ok, named, conf = _summary(effect, clean)
-    print(f"\n{len(results)} cases in {time.perf_counter() - t0:.0f} s")
+    print(f"\n{len(results)} cases in {time.perf_counter() - t0:.0f} s"
+          + (f" ({len(failed)} not run, listed above)" if failed else ""))
     if effect:
         n_par = sum(len(r["within"]) for r in effect)
         n_in = sum(w for r in effect for *_, w in r["within"])
