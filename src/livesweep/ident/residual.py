@@ -16,9 +16,10 @@ added to the case's ``[state_space]`` table (:func:`augment_table`: new states, 
 delays, as a user would write them) and re-identified. One is kept when its refit passes the same
 test, J_ave drops by :data:`MIN_RELATIVE_COST_DROP`, the verification error (when a callback is
 given) is not worse beyond noise (at the one-sided normal quantile of ``false_alarm``), and its new
-parameters meet the accuracy guidelines (CR% <= 20, I% <= 10). A clearly present effect with one poorly determined shape parameter (a sharp mode's
-damping, a notch's depth) is kept with that parameter fixed at its fitted value (structure
-reduction inside the effect). Rivals that both pass go to the simpler one unless the richer one's
+parameters meet the accuracy guidelines (CR% <= 20, I% <= 10). A clearly present effect with one
+poorly determined shape parameter (a sharp mode's damping, a notch's depth), or whose only
+parameter is at least three Cramer-Rao bounds from zero, is kept with that parameter fixed at its
+fitted value (structure reduction inside the effect). Rivals that both pass go to the simpler one unless the richer one's
 extra parameters are significant; rival explanations of the same feature that the data prefer
 no more than they would prefer an effect to nothing are reported as hard to tell apart
 (:func:`_rivals`). When the best candidate fails alone, the strongest are tried in pairs, and a

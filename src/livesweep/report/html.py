@@ -325,7 +325,8 @@ def _residual(report: dict) -> str:
             "catalogue of effects the model may lack; the best-supported one is added and kept only when the drop of "
             f"the residual is significant{e(test)}, J<sub>ave</sub> falls by 10 %, the verification error does not get "
             "worse beyond noise, and its parameters meet the CR and insensitivity guidelines (one poorly determined "
-            "shape parameter may be fixed at its fitted value).</p>" + "".join(blocks))
+            "shape parameter, or an effect's only parameter at least three Cramér–Rao bounds from zero, may be "
+            "fixed at its fitted value and is marked so).</p>" + "".join(blocks))
 
 
 _APPENDIX = """
