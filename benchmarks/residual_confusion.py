@@ -1117,6 +1117,95 @@ HELD_OUT_10_CLEAN = ([Case(f"clean hover seed {s}", "hover", s) for s in range(1
                      + [Case(f"clean cruise seed {s}", "cruise", s) for s in range(1120, 1128)]
                      + [Case(f"clean quad seed {s}", "quad", s) for s in range(1120, 1128)])
 
+# Written at stop 27 after held-out-10 was run, before the backward step (an effect added earlier
+# is re-tested once a later one is in) was written. Run once.
+HELD_OUT_11 = [
+    Case("hover 2nd-order 6 rad/s zeta 0.6 dr", "hover", 1201,
+         (_e("actuator_second_order", input="dr", omega_rad_s=6.0, zeta=0.6),), {("actuator_second_order", "dr")},
+         {"wn_act_dr": 6.0, "zeta_act_dr": 0.6}),
+    Case("hover delay 80 ms dr", "hover", 1202, (_e("time_delay", input="dr", delay_s=0.08),), {("time_delay", "dr")},
+         {"tau_dr": 0.08}),
+    Case("hover lag 0.05 s da", "hover", 1203, (_e("actuator_lag", input="da", time_constant_s=0.05),),
+         {("actuator_lag", "da")}, {"w_act_da": 20.0}),
+    Case("hover notch 2.5 rad/s depth 0.7 dr", "hover", 1204,
+         (_e("notch_filter", input="dr", omega_rad_s=2.5, zeta=0.3, depth=0.7),), {("notch_filter", "dr")},
+         {"w_notch_dr": 2.5, "zeta_notch_dr": 0.3, "depth_notch_dr": 0.7}),
+    Case("hover mode phi 9 rad/s zeta 0.05/0.15", "hover", 1205,
+         (_e("structural_mode", output="phi", omega_rad_s=9.0, zeta_pole=0.05, zeta_zero=0.15),),
+         {("structural_mode", "phi")}, {"w_mode_phi": 9.0, "zeta_mode_phi": 0.05, "zeta_zero_mode_phi": 0.15}),
+    Case("hover skew 60 ms r", "hover", 1206, (_e("sensor_skew", output="r", delay_s=0.06),),
+         {("sensor_skew", "r")}, {"skew_r": 0.06}),
+    Case("hover scale 0.75 phi", "hover", 1207, (_e("scale_factor", output="phi", factor=0.75),),
+         {("scale_factor", "phi")}, {"k_phi": 0.75}),
+    Case("hover missing Lv", "hover", 1208, (), {("missing_derivative", "F[p][v]")}, {"F_p_v": -0.004374},
+         (("drop", "F", "p", "v", "Lv"),)),
+    Case("hover 2nd-order da + mode r", "hover", 1209,
+         (_e("actuator_second_order", input="da", omega_rad_s=9.0, zeta=0.6),
+          _e("structural_mode", output="r", omega_rad_s=8.0, zeta_pole=0.05, zeta_zero=0.15)),
+         {("actuator_second_order", "da"), ("structural_mode", "r")}, {"wn_act_da": 9.0, "w_mode_r": 8.0}),
+    Case("hover 2nd-order dr + skew phi", "hover", 1210,
+         (_e("actuator_second_order", input="dr", omega_rad_s=7.0, zeta=0.5),
+          _e("sensor_skew", output="phi", delay_s=0.05)),
+         {("actuator_second_order", "dr"), ("sensor_skew", "phi")}, {"wn_act_dr": 7.0, "skew_phi": 0.05}),
+    Case("cruise 2nd-order 9 rad/s zeta 0.5 dr", "cruise", 1201,
+         (_e("actuator_second_order", input="dr", omega_rad_s=9.0, zeta=0.5),), {("actuator_second_order", "dr")},
+         {"wn_act_dr": 9.0, "zeta_act_dr": 0.5}),
+    Case("cruise delay 60 ms da", "cruise", 1202, (_e("time_delay", input="da", delay_s=0.06),),
+         {("time_delay", "da")}, {"tau_a": TAU_A + 0.06}, (("fix", "tau_a", TAU_A),)),
+    Case("cruise lag 0.06 s dr", "cruise", 1203, (_e("actuator_lag", input="dr", time_constant_s=0.06),),
+         {("actuator_lag", "dr")}, {"w_act_dr": 1 / 0.06}),
+    Case("cruise notch 10 rad/s depth 0.7 dr", "cruise", 1204,
+         (_e("notch_filter", input="dr", omega_rad_s=10.0, zeta=0.3, depth=0.7),), {("notch_filter", "dr")},
+         {"w_notch_dr": 10.0, "zeta_notch_dr": 0.3, "depth_notch_dr": 0.7}),
+    Case("cruise mode r 8 rad/s zeta 0.05/0.15", "cruise", 1205,
+         (_e("structural_mode", output="r", omega_rad_s=8.0, zeta_pole=0.05, zeta_zero=0.15),),
+         {("structural_mode", "r")}, {"w_mode_r": 8.0, "zeta_mode_r": 0.05, "zeta_zero_mode_r": 0.15}),
+    Case("cruise skew 40 ms p", "cruise", 1206, (_e("sensor_skew", output="p", delay_s=0.04),),
+         {("sensor_skew", "p")}, {"skew_p": 0.04}),
+    Case("cruise scale 1.25 p", "cruise", 1207, (_e("scale_factor", output="p", factor=1.25),),
+         {("scale_factor", "p")}, {"k_p": 1.25}),
+    Case("cruise missing Np", "cruise", 1208, (), {("missing_derivative", "F[r][p]")}, {"F_r_p": -0.2308},
+         (("drop", "F", "r", "p", "Np"),)),
+    Case("cruise 2nd-order da + skew r", "cruise", 1209,
+         (_e("actuator_second_order", input="da", omega_rad_s=10.0, zeta=0.5),
+          _e("sensor_skew", output="r", delay_s=0.04)),
+         {("actuator_second_order", "da"), ("sensor_skew", "r")}, {"wn_act_da": 10.0, "skew_r": 0.04}),
+    Case("cruise lag da + mode p", "cruise", 1210,
+         (_e("actuator_lag", input="da", time_constant_s=0.08),
+          _e("structural_mode", output="p", omega_rad_s=13.0, zeta_pole=0.05, zeta_zero=0.15)),
+         {("actuator_lag", "da"), ("structural_mode", "p")}, {"w_act_da": 12.5, "w_mode_p": 13.0}),
+    Case("quad delay 15 ms roll", "quad", 1201, (_e("time_delay", input="roll_cmd", delay_s=0.015),),
+         {("time_delay", "roll_cmd")}, {"tau_roll": TAU_Q + 0.015}),
+    Case("quad lag 50 ms roll", "quad", 1202, (_e("actuator_lag", input="roll_cmd", time_constant_s=0.05),),
+         {("actuator_lag", "roll_cmd")}, {"w_act_roll_cmd": 20.0}),
+    Case("quad 2nd-order 30 rad/s zeta 0.5 pitch", "quad", 1203,
+         (_e("actuator_second_order", input="pitch_cmd", omega_rad_s=30.0, zeta=0.5),),
+         {("actuator_second_order", "pitch_cmd")}, {"wn_act_pitch_cmd": 30.0, "zeta_act_pitch_cmd": 0.5}),
+    Case("quad notch 10 rad/s depth 0.6 roll", "quad", 1204,
+         (_e("notch_filter", input="roll_cmd", omega_rad_s=10.0, zeta=0.3, depth=0.6),), {("notch_filter", "roll_cmd")},
+         {"w_notch_roll_cmd": 10.0, "zeta_notch_roll_cmd": 0.3, "depth_notch_roll_cmd": 0.6}),
+    Case("quad mode p 20 rad/s zeta 0.05/0.15", "quad", 1205,
+         (_e("structural_mode", output="p", omega_rad_s=20.0, zeta_pole=0.05, zeta_zero=0.15),),
+         {("structural_mode", "p")}, {"w_mode_p": 20.0, "zeta_mode_p": 0.05, "zeta_zero_mode_p": 0.15}),
+    Case("quad skew 40 ms theta", "quad", 1206, (_e("sensor_skew", output="theta", delay_s=0.04),),
+         {("sensor_skew", "theta")}, {"skew_theta": 0.04}),
+    Case("quad scale 1.2 q", "quad", 1207, (_e("scale_factor", output="q", factor=1.2),),
+         {("scale_factor", "q")}, {"k_q": 1.2}),
+    Case("quad missing Lv", "quad", 1208, (), {("missing_derivative", "F[p][v]")}, {"F_p_v": -0.80},
+         (("drop", "F", "p", "v", "Lv"),)),
+    Case("quad 2nd-order pitch + skew p", "quad", 1209,
+         (_e("actuator_second_order", input="pitch_cmd", omega_rad_s=20.0, zeta=0.5),
+          _e("sensor_skew", output="p", delay_s=0.03)),
+         {("actuator_second_order", "pitch_cmd"), ("sensor_skew", "p")}, {"wn_act_pitch_cmd": 20.0, "skew_p": 0.03}),
+    Case("quad notch roll + mode q", "quad", 1210,
+         (_e("notch_filter", input="roll_cmd", omega_rad_s=8.0, zeta=0.3, depth=0.7),
+          _e("structural_mode", output="q", omega_rad_s=15.0, zeta_pole=0.05, zeta_zero=0.15)),
+         {("notch_filter", "roll_cmd"), ("structural_mode", "q")}, {"w_notch_roll_cmd": 8.0, "w_mode_q": 15.0}),
+]
+HELD_OUT_11_CLEAN = ([Case(f"clean hover seed {s}", "hover", s) for s in range(1220, 1230)]
+                     + [Case(f"clean cruise seed {s}", "cruise", s) for s in range(1220, 1228)]
+                     + [Case(f"clean quad seed {s}", "quad", s) for s in range(1220, 1228)])
+
 def _summary(results, clean):
     """(right, named, confusion): ``right`` counts the cases whose added effects are exactly the
     injected ones (or a scale error reported as one the data cannot show); ``named`` also counts
@@ -1178,6 +1267,8 @@ def main(argv=None) -> None:
                     help="run the ninth held-out set (written before control-path refits on inadequate fits, stop 27)")
     ap.add_argument("--held-out-10", action="store_true",
                     help="run the tenth held-out set (written after held-out-9 was run, no change to follow, stop 27)")
+    ap.add_argument("--held-out-11", action="store_true",
+                    help="run the eleventh held-out set (written before the backward step, stop 27)")
     ap.add_argument("-j", type=int, default=1, help="processes")
     ap.add_argument("--only", default=None, help="airframe name or a substring of case names")
     a = ap.parse_args(argv)
@@ -1189,7 +1280,8 @@ def main(argv=None) -> None:
              else HELD_OUT_7 + HELD_OUT_7_CLEAN if a.held_out_7
              else HELD_OUT_8 + HELD_OUT_8_CLEAN if a.held_out_8
              else HELD_OUT_9 + HELD_OUT_9_CLEAN if a.held_out_9
-             else HELD_OUT_10 + HELD_OUT_10_CLEAN if a.held_out_10 else HELD_OUT + HELD_OUT_CLEAN)
+             else HELD_OUT_10 + HELD_OUT_10_CLEAN if a.held_out_10
+             else HELD_OUT_11 + HELD_OUT_11_CLEAN if a.held_out_11 else HELD_OUT + HELD_OUT_CLEAN)
     if a.only:
         cases = [c for c in cases if a.only == c.airframe or a.only in c.name]
     t0 = time.perf_counter()
