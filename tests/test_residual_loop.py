@@ -696,3 +696,27 @@ def test_an_effect_s_only_parameter_three_bounds_from_zero_is_kept_and_said_to_b
     assert MAX_CRAMER_RAO_PCT < why["cramer_rao_pct"] <= ONLY_PARAMETER_CR_PCT
     assert abs(skew["value"] - 0.03) <= 3 * why["cramer_rao_pct"] / 100 * skew["value"]
     assert "poorly determined" in effect_text(loop.added[0])
+
+
+def test_an_effect_added_first_is_taken_out_when_a_later_one_explains_it():
+    """Hover, a second-order actuator on dr (8 rad/s, zeta 0.5) with a 50 ms skew on p. The first
+    step adds a delay on dr (simpler than the actuator and not significantly worse alone), the
+    second the skew, the third the actuator. With the actuator in, the delay no longer lowers the
+    whitened residual significantly (the F-test of a pair's partners), so the backward step takes
+    it out: the model ends with the skew and the actuator, each parameter within 3 Cramer-Rao
+    bounds of the injection, and the report says what was taken out. (Seen on held-out-10 seed
+    1110 of benchmarks/residual_confusion.py, where the delay stayed in; seeds 91-94 here all
+    add the delay first.)"""
+    effects = [make_effect("actuator_second_order", input="dr", omega_rad_s=8.0, zeta=0.5),
+               make_effect("sensor_skew", output="p", delay_s=0.05)]
+    frs, table, fit = _hover(effects, seed=91)
+    loop = run_residual_loop(table, fit, frs)
+    order = [(s.effect["kind"], s.effect["where"]) for s in loop.steps if s.effect]
+    assert order[0] == ("time_delay", "dr") and "removed" in loop.steps[0].effect
+    assert sorted((e["kind"], e["where"]) for e in loop.added) == [("actuator_second_order", "dr"), ("sensor_skew", "p")]
+    p = {x["name"]: x for e in loop.added for x in e["parameters"]}
+    for name, truth in (("wn_act_dr", 8.0), ("zeta_act_dr", 0.5), ("skew_p", 0.05)):
+        assert abs(p[name]["value"] - truth) <= 3 * p[name]["cramer_rao_pct"] / 100 * p[name]["value"], p[name]
+    assert "tau_dr" not in loop.table["parameters"]
+    assert "took out time_delay at dr" in loop.conclusion
+    assert loop.fit.cost_average <= 0.5 * loop.steps[0].cost_before

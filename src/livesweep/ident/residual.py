@@ -11,25 +11,26 @@ squares its best parameters give after the model's own parameters re-adjust
 Model selection (:mod:`livesweep.ident.selection`). A candidate counts when an F-test on the
 whitened sums of squares, with the effective number of independent frequency points (from the
 windows' resolution bandwidth) and the candidate's parameters counted, rejects "nothing" at
-``false_alarm / m`` for ``m`` candidates screened. The strongest (smallest p-value first) are
-added to the case's ``[state_space]`` table (:func:`augment_table`: new states, parameters,
-delays, as a user would write them) and re-identified. One is kept when its refit passes the same
-test, J_ave drops by :data:`MIN_RELATIVE_COST_DROP`, the verification error (when a callback is
-given) is not worse beyond noise (at the one-sided normal quantile of ``false_alarm``), and its new
-parameters meet the accuracy guidelines (CR% <= 20, I% <= 10). A clearly present effect with one
-poorly determined shape parameter (a sharp mode's damping, a notch's depth), or whose only
-parameter is at least three Cramer-Rao bounds from zero, is kept with that parameter fixed at its
-fitted value (structure reduction inside the effect). Rivals that both pass go to the simpler one unless the richer one's
-extra parameters are significant; rival explanations of the same feature that the data prefer
-no more than they would prefer an effect to nothing are reported as hard to tell apart
+``false_alarm / m`` for ``m`` candidates screened. The strongest (smallest p-value first) are added
+to the case's ``[state_space]`` table (:func:`augment_table`: new states, parameters, delays, as a
+user would write them) and re-identified. One is kept when its refit passes the same test, J_ave
+drops by :data:`MIN_RELATIVE_COST_DROP`, the verification error (when a callback is given) is not
+worse beyond noise (at the one-sided normal quantile of ``false_alarm``), and its new parameters
+meet the accuracy guidelines (CR% <= 20, I% <= 10). A clearly present effect with one poorly
+determined shape parameter (a sharp mode's damping, a notch's depth), or whose only parameter is at
+least three Cramer-Rao bounds from zero, is kept with that parameter fixed at its fitted value
+(structure reduction inside the effect). Rivals that both pass go to the simpler one unless the
+richer one's extra parameters are significant; rival explanations of the same feature that the data
+prefer no more than they would prefer an effect to nothing are reported as hard to tell apart
 (:func:`_rivals`). When the best candidate fails alone, the strongest are tried in pairs, and a
-pair is kept only if each partner is significant on top of the other alone. When the fit is
-inadequate (J_ave above the guideline, or a whitened mean square above ``NOISE_INFLATION``) the
-screen underrates what refits explain: the best-ranked are refitted whatever their screening test
-and, if none explains the residual (:func:`_explained`), every missing derivative and every
-control-path effect once. A coherent pair the model has no path for (no residual in dB to
-screen) is first given one (:mod:`livesweep.ident.coupling`). The loop repeats until nothing
-significant remains or ``max_steps``.
+pair is kept only if each partner is significant on top of the other alone; after each step, an
+effect added earlier that is no longer significant with the later ones in is taken out
+(:func:`_backward`). When the fit is inadequate (J_ave above the guideline, or a whitened mean
+square above ``NOISE_INFLATION``) the screen underrates what refits explain: the best-ranked are
+refitted whatever their screening test and, if none explains the residual (:func:`_explained`),
+every missing derivative and every control-path effect once. A coherent pair the model has no path
+for (no residual in dB to screen) is first given one (:mod:`livesweep.ident.coupling`). The loop
+repeats until nothing significant remains or ``max_steps``.
 """
 
 from __future__ import annotations
@@ -164,7 +165,9 @@ class ResidualLoop:
     Attributes
     ----------
     steps : tuple of LoopStep
-        Accepted steps, then the final step that found nothing (or nothing acceptable).
+        Accepted steps, then the final step that found nothing (or nothing acceptable). A step's
+        effect carries ``removes`` (kind, where, reason) when the backward step took an earlier
+        effect out after it was added, and that earlier effect ``removed`` (why, at which step).
     table : dict
         The final ``[state_space]`` table (with every accepted effect, values = final fit).
     fit : StateSpaceFit
@@ -195,10 +198,12 @@ class ResidualLoop:
 
     @property
     def added(self) -> tuple:
-        """Every effect added, in order (the partners of a pair added together as their own entries)."""
+        """Every effect in the final model, in the order added (the partners of a pair added
+        together as their own entries; one taken out at a later step, marked ``removed`` in its
+        step, is not listed)."""
         out = []
         for s in self.steps:
-            if s.effect is not None:
+            if s.effect is not None and "removed" not in s.effect:
                 out.append({k: v for k, v in s.effect.items() if k != "with"})
                 out += list(s.effect.get("with", ()))
         return tuple(out)
@@ -329,6 +334,7 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
             raise ConfigError(f"residual loop: the fitted model's response {r.output}/{r.input} is zero or not finite "
                               f"at some fitting points; the loop cannot compare it with the data in dB")
     any_significant, limits = False, []
+    history = []          # each effect this loop added: the table before it, its candidates, parameters, record
     for _ in range(max_steps + 1):
         ss_before = whitened_ss(before)
         cands = diagnose(table, fit, pairs, frs, kinds=kinds, residuals=before)
@@ -350,7 +356,7 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
         if not strong and inadequate:
             strong = ranked
         limits = _limits(cands, judge.test(ss_before, ss_before, 1, n_model).needed)
-        tried, best, accepted, singles = [], None, [], {}
+        tried, best, accepted, singles, cand_of = [], None, [], {}, {}
 
         def single(c):
             """Re-identify with ``c`` alone (once per kind and place); its (record, result)."""
@@ -358,6 +364,7 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                 if progress:
                     progress(f"residual loop: re-identifying with {c.kind} at {c.where} (evidence {c.evidence:.0f})")
                 rec, new = singles[(c.kind, c.where)] = _try(table, c, fit, judge, ss_before, ver)
+                cand_of[id(rec)] = [c]
                 tried.append(rec)
                 if rec["accepted"]:
                     accepted.append((rec, new))
@@ -390,6 +397,7 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                 # is kept only if each partner lowers S significantly on top of the other alone
                 # (:func:`_partners_needed`; the partners not yet refitted alone are refitted).
                 duo = _pair_search(ranked, table, fit, judge, ss_before, ver, progress)
+                cand_of.update({id(rec): list(members) for members, rec, _ in duo})
                 tried += [rec for _, rec, _ in duo]
                 for members, rec, _ in duo:
                     if rec["accepted"]:
@@ -415,6 +423,7 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                                   _ver_summary(ver), _ver_summary(ver), before, before))
             unexplained += [{"kind": t["kind"], "where": t["where"], "reason": t["reason"]} for t in tried]
             break
+        table_before = table
         rec, (table, fit, ver_after, after) = best
         rec["ambiguous_with"] = _rivals(rec, tried, judge, n_model)
         effect = {"kind": rec["kind"], "where": rec["where"], "parameters": rec["parameters"],
@@ -423,13 +432,29 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
             effect["ambiguous_with"] = rec["ambiguous_with"]
         if rec.get("with"):
             effect["with"] = rec["with"]
-        steps.append(LoopStep(tuple(cands), tuple(tried), effect, rec["cost_before"], rec["cost_after"],
+        history.append({"table": table_before, "cands": cand_of[id(rec)], "effect": effect,
+                        "names": [p["name"] for p in rec["parameters"]]
+                        + [p["name"] for w in rec.get("with", ()) for p in w["parameters"]]})
+        cost_after = rec["cost_after"]
+        n_fits += sum(len(h["cands"]) == 1 for h in history[:-1])
+        out = _backward(history, table, fit, judge, progress) if len(history) > 1 else None
+        if out is not None:
+            # an effect added earlier is not significant any more: the later one explains what it did
+            i, table, fit, after, why = out
+            old = history.pop(i)["effect"]
+            old["removed"] = f"taken out at step {len(steps) + 1}: {why}"
+            effect["removes"] = {"kind": old["kind"], "where": old["where"], "reason": why}
+            ver_after = verify(fit.model, fit.theta) if verify else None
+            cost_after = fit.cost_average
+        steps.append(LoopStep(tuple(cands), tuple(tried), effect, rec["cost_before"], cost_after,
                               _ver_summary(ver), _ver_summary(ver_after), before, after))
         ver, before = ver_after, after
     for r in before:                                  # the final fit's residual
         if r.rms_noise_units > 2.0:
             unexplained.append({"pair": f"{r.output}/{r.input}", "rms_noise_units": round(r.rms_noise_units, 2)})
-    added = [e for s in steps if s.effect is not None for e in (s.effect, *s.effect.get("with", ()))]
+    added = [e for s in steps if s.effect is not None and "removed" not in s.effect
+             for e in (s.effect, *s.effect.get("with", ()))]
+    removed = [s.effect for s in steps if s.effect is not None and "removed" in s.effect]
     found = {(e["kind"], e["where"]) for e in added}
     for e in added:              # a rival added at a later step was not an alternative but a second effect
         if "ambiguous_with" in e:
@@ -441,6 +466,8 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
             f"{e['kind']} at {e['where']}" + "".join(f" (hard to tell from {a['kind']} at {a['where']} in this band)"
                                                       for a in e.get("ambiguous_with", ()))
             for e in added)
+        conclusion += "".join(f"; took out {e['kind']} at {e['where']} added before ({e['removed'].split(': ', 1)[1]})"
+                              for e in removed)
     elif any_significant:
         conclusion = "residual above noise, but no candidate effect passed the acceptance tests"
     else:
@@ -481,6 +508,11 @@ def effect_text(effect: dict) -> str:
         text += f"; together with {w['kind']} at {w['where']}: " + ", ".join(par(p) for p in w["parameters"])
     for a in effect.get("ambiguous_with", ()):
         text += f"; hard to tell from {a['kind']} at {a['where']} in this band"
+    if "removes" in effect:
+        r = effect["removes"]
+        text += f"; took out {r['kind']} at {r['where']}, added before: {r['reason']}"
+    if "removed" in effect:
+        text += f" ({effect['removed']})"
     return text
 
 
@@ -588,6 +620,53 @@ def _rivals(rec, tried, judge, n_model) -> list[dict]:
             out.append({"kind": t["kind"], "where": t["where"], "evidence_after": t["evidence_after"],
                         "cost_after": t["cost_after"], "parameters": t["parameters"], "accepted": t["accepted"]})
     return out
+
+
+def _backward(history, table, fit, judge, progress):
+    """The backward step of stepwise selection: re-test each effect added before the last one.
+
+    An earlier single effect is taken out (the model rebuilt from the table before it, the later
+    effects added again at their fitted values, and refitted) when it no longer lowers the
+    whitened sum of squares significantly on top of the others: the F-test at ``false_alarm``
+    with its parameters counted, the model without it nested in the current one, as
+    :func:`_partners_needed` tests the partners of a pair (a delay added first, explained away by
+    the second-order actuator added at the same input later). The least significant one goes.
+
+    Returns
+    -------
+    tuple or None
+        ``(index in history, table, fit, residuals, reason)`` of the model without it, or None.
+    """
+    ss_with = whitened_ss(tuple(pair_residuals(fit.model, fit.theta, judge.pairs, judge.frs)))
+    n_with = _n_free(fit)
+    out = None
+    for i, h in enumerate(history[:-1]):
+        if len(h["cands"]) != 1:
+            continue                              # a pair stays a pair
+        if progress:
+            progress(f"residual loop: is {h['effect']['kind']} at {h['effect']['where']} still needed?")
+        try:
+            t = copy.deepcopy(h["table"])
+            for name in t["parameters"]:          # everything else where the current fit has it
+                if name in table["parameters"] and name not in h["names"]:
+                    t["parameters"][name] = copy.deepcopy(table["parameters"][name])
+            for later in history[i + 1:]:
+                for c in later["cands"]:
+                    t, _ = augment_table(t, c)
+                for name in later["names"]:
+                    t["parameters"][name] = copy.deepcopy(table["parameters"][name])
+            f = fit_state_space(StateSpaceModel.from_table(t), judge.pairs, max_nfev=100)
+        except (ConfigError, np.linalg.LinAlgError, ValueError, KeyError):
+            continue
+        res = tuple(pair_residuals(f.model, f.theta, judge.pairs, judge.frs))
+        ss = whitened_ss(res)
+        k = len(h["names"])
+        sig = significance(ss, ss_with, k, judge.n_points, n_with - k, 1, judge.alpha)
+        if not sig.significant and (out is None or sig.p_value > out[0]):
+            why = (f"with the later effects in, it lowers the whitened residual by {max(ss - ss_with, 0.0):.0f}, "
+                   f"< {sig.needed:.0f} needed for its {k} parameter(s)")
+            out = (sig.p_value, i, table_with_fit(t, f), f, res, why)
+    return None if out is None else out[1:]
 
 
 def _as_list(v):

@@ -305,7 +305,8 @@ def _residual(report: dict) -> str:
                       f"{st['cost_after']:.2f}{ver}. {why}</p>"
                       + (f"<ul>{tried}</ul>" if tried else "") + _img(st.get("plot"), 1100, f"residual step {k + 1}"))
     if rl.get("parameter_units") and rl.get("augmented_case"):
-        final = {p["name"]: p for e_ in (st["effect"] for st in rl["steps"] if st["effect"])
+        kept = (st["effect"] for st in rl["steps"] if st["effect"] and "removed" not in st["effect"])
+        final = {p["name"]: p for e_ in kept
                  for p in [*e_["parameters"], *(q for w in e_.get("with", ()) for q in w["parameters"])]}
         if final:
             blocks.append("<h3>Parameters of the added effects</h3>" + _parameter_table(
