@@ -440,7 +440,9 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
         out = _backward(history, table, fit, judge, progress) if len(history) > 1 else None
         if out is not None:
             # an effect added earlier is not significant any more: the later one explains what it did
-            i, table, fit, after, why = out
+            i, table, fit, after, why, befores = out
+            for h, t in zip(history[i + 1:], befores):
+                h["table"] = t                    # a later re-test must not bring it back
             old = history.pop(i)["effect"]
             old["removed"] = f"taken out at step {len(steps) + 1}: {why}"
             effect["removes"] = {"kind": old["kind"], "where": old["where"], "reason": why}
@@ -635,7 +637,8 @@ def _backward(history, table, fit, judge, progress):
     Returns
     -------
     tuple or None
-        ``(index in history, table, fit, residuals, reason)`` of the model without it, or None.
+        ``(index in history, table, fit, residuals, reason, befores)`` of the model without it
+        (``befores``: the table before each later effect, rebuilt without it), or None.
     """
     ss_with = whitened_ss(tuple(pair_residuals(fit.model, fit.theta, judge.pairs, judge.frs)))
     n_with = _n_free(fit)
@@ -650,7 +653,9 @@ def _backward(history, table, fit, judge, progress):
             for name in t["parameters"]:          # everything else where the current fit has it
                 if name in table["parameters"] and name not in h["names"]:
                     t["parameters"][name] = copy.deepcopy(table["parameters"][name])
+            befores = []                          # each later effect's table before it, without this one
             for later in history[i + 1:]:
+                befores.append(copy.deepcopy(t))
                 for c in later["cands"]:
                     t, _ = augment_table(t, c)
                 for name in later["names"]:
@@ -665,7 +670,7 @@ def _backward(history, table, fit, judge, progress):
         if not sig.significant and (out is None or sig.p_value > out[0]):
             why = (f"with the later effects in, it lowers the whitened residual by {max(ss - ss_with, 0.0):.0f}, "
                    f"< {sig.needed:.0f} needed for its {k} parameter(s)")
-            out = (sig.p_value, i, table_with_fit(t, f), f, res, why)
+            out = (sig.p_value, i, table_with_fit(t, f), f, res, why, befores)
     return None if out is None else out[1:]
 
 
