@@ -45,7 +45,7 @@ from livesweep.numbers import finite_or_none
 from livesweep.numbers import frozen_array as _frozen
 
 __all__ = ["Accuracy", "accuracy_from_jacobian", "MONTE_CARLO_SCATTER_OVER_CR", "MAX_CRAMER_RAO_PCT",
-           "parameter_report", "MAX_INSENSITIVITY_PCT", "MAX_CORRELATION", "MAX_COST", "MAX_COST_AVERAGE"]
+           "parameter_report", "guideline_failures", "MAX_INSENSITIVITY_PCT", "MAX_CORRELATION", "MAX_COST", "MAX_COST_AVERAGE"]
 
 #: Observed scatter (std) of Monte-Carlo estimates divided by the mean raw Cramer-Rao bound, median
 #: over parameters (module docstring; XV-15 cruise simulator, 80 realisations).
@@ -161,4 +161,18 @@ def parameter_report(fit, names) -> list[dict]:
         q = fit.parameter(n)
         out.append({"name": n, "value": float(q.value), "cramer_rao_pct": finite_or_none(q.cramer_rao_pct, 3),
                     "insensitivity_pct": finite_or_none(q.insensitivity_pct, 3), "fixed": bool(q.fixed)})
+    return out
+
+
+def guideline_failures(params) -> list[str]:
+    """The accuracy guidelines (CR% <= 20, I% <= 10) each free parameter of ``params``
+    (:func:`parameter_report` entries) fails, as reasons ("Nr CR% 31.2 > 20")."""
+    out = []
+    for p in params:
+        if p.get("fixed"):
+            continue
+        if p["cramer_rao_pct"] is None or p["cramer_rao_pct"] > MAX_CRAMER_RAO_PCT:
+            out.append(f"{p['name']} CR% {p['cramer_rao_pct']} > {MAX_CRAMER_RAO_PCT:g}")
+        if p["insensitivity_pct"] is None or p["insensitivity_pct"] > MAX_INSENSITIVITY_PCT:
+            out.append(f"{p['name']} I% {p['insensitivity_pct']} > {MAX_INSENSITIVITY_PCT:g}")
     return out

@@ -21,7 +21,7 @@ import numpy as np
 from livesweep.effects.derivative import derivative_slots
 from livesweep.effects.table import add_entry, normalised, restart_from
 from livesweep.errors import ConfigError
-from livesweep.ident.accuracy import MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT, parameter_report
+from livesweep.ident.accuracy import MAX_COST_AVERAGE, guideline_failures, parameter_report
 from livesweep.ident.residual_space import model_misfit
 from livesweep.ident.state_space import StateSpaceFit, StateSpaceModel, fit_state_space, select_pairs
 
@@ -145,10 +145,7 @@ def find_coupling(table: dict, origin: dict, fit: StateSpaceFit, frs, skipped, *
         why = []
         if not new_fit.converged:
             why.append("fit did not converge")
-        if not (par["cramer_rao_pct"] is not None and par["cramer_rao_pct"] <= MAX_CRAMER_RAO_PCT):
-            why.append(f"{name} CR% {par['cramer_rao_pct']} > {MAX_CRAMER_RAO_PCT:g}")
-        if not (par["insensitivity_pct"] is not None and par["insensitivity_pct"] <= MAX_INSENSITIVITY_PCT):
-            why.append(f"{name} I% {par['insensitivity_pct']} > {MAX_INSENSITIVITY_PCT:g}")
+        why += guideline_failures([par])
         if not new_fit.cost_average <= MAX_COST_AVERAGE:
             why.append(f"J_ave {new_fit.cost_average:.1f} > {MAX_COST_AVERAGE:g}")
         got = {"where": where, "cost_after": float(new_fit.cost_average), "reason": "; ".join(why) or "acceptable",

@@ -45,7 +45,8 @@ import numpy as np
 from livesweep.effects import EFFECT_KINDS, SEARCHED_KINDS, Candidate
 from livesweep.effects.table import normalised, restart_from
 from livesweep.errors import ConfigError
-from livesweep.ident.accuracy import MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT, parameter_report
+from livesweep.ident.accuracy import (MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT, guideline_failures,
+                                      parameter_report)
 from livesweep.ident.coupling import find_coupling, no_path_pairs
 from livesweep.ident.residual_space import (PairResidual, ResidualSpace, band_of, pair_residuals,
                                             whitened_ss)
@@ -412,7 +413,7 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                     best = pick
             # An accepted candidate that explains less than half of what the best-explaining one
             # does (even if that one failed a guideline) is a partial explanation, not the effect.
-            top = max((t.get("evidence_after", -np.inf) for t in tried), default=-np.inf)
+            top = _top_evidence(tried)
             if best is not None and best[0]["evidence_after"] < PARTIAL * top:
                 best[0]["accepted"] = False
                 best[0]["reason"] = (f"explains {best[0]['evidence_after']:.0f}, less than half of the best candidate's "
@@ -437,14 +438,14 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                         + [p["name"] for w in rec.get("with", ()) for p in w["parameters"]]})
         cost_after = rec["cost_after"]
         n_fits += sum(len(h["cands"]) == 1 for h in history[:-1])
-        out = _backward(history, table, fit, judge, progress) if len(history) > 1 else None
+        out = _backward(history, table, fit, whitened_ss(after), judge, progress) if len(history) > 1 else None
         if out is not None:
             # an effect added earlier is not significant any more: the later one explains what it did
             i, table, fit, after, why, befores = out
             for h, t in zip(history[i + 1:], befores):
                 h["table"] = t                    # a later re-test must not bring it back
             old = history.pop(i)["effect"]
-            old["removed"] = f"taken out at step {len(steps) + 1}: {why}"
+            old["removed"] = {"at_step": len(steps) + 1, "reason": why}
             effect["removes"] = {"kind": old["kind"], "where": old["where"], "reason": why}
             ver_after = verify(fit.model, fit.theta) if verify else None
             cost_after = fit.cost_average
@@ -468,7 +469,7 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
             f"{e['kind']} at {e['where']}" + "".join(f" (hard to tell from {a['kind']} at {a['where']} in this band)"
                                                       for a in e.get("ambiguous_with", ()))
             for e in added)
-        conclusion += "".join(f"; took out {e['kind']} at {e['where']} added before ({e['removed'].split(': ', 1)[1]})"
+        conclusion += "".join(f"; took out {e['kind']} at {e['where']} added before ({e['removed']['reason']})"
                               for e in removed)
     elif any_significant:
         conclusion = "residual above noise, but no candidate effect passed the acceptance tests"
@@ -494,8 +495,13 @@ PARTIAL = 0.5
 def _explained(tried) -> bool:
     """Whether some accepted refit in ``tried`` explains the residual, not just part of it
     (:data:`PARTIAL`)."""
-    top = max((t.get("evidence_after", -np.inf) for t in tried), default=-np.inf)
+    top = _top_evidence(tried)
     return any(t["accepted"] and t["evidence_after"] >= PARTIAL * top for t in tried)
+
+
+def _top_evidence(tried) -> float:
+    """The largest drop of the whitened residual a refit in ``tried`` gave, accepted or not."""
+    return max((t.get("evidence_after", -np.inf) for t in tried), default=-np.inf)
 
 
 def effect_text(effect: dict) -> str:
@@ -514,7 +520,7 @@ def effect_text(effect: dict) -> str:
         r = effect["removes"]
         text += f"; took out {r['kind']} at {r['where']}, added before: {r['reason']}"
     if "removed" in effect:
-        text += f" ({effect['removed']})"
+        text += f" (taken out at step {effect['removed']['at_step']}: {effect['removed']['reason']})"
     return text
 
 
@@ -624,7 +630,7 @@ def _rivals(rec, tried, judge, n_model) -> list[dict]:
     return out
 
 
-def _backward(history, table, fit, judge, progress):
+def _backward(history, table, fit, ss_with, judge, progress):
     """The backward step of stepwise selection: re-test each effect added before the last one.
 
     An earlier single effect is taken out (the model rebuilt from the table before it, the later
@@ -634,13 +640,23 @@ def _backward(history, table, fit, judge, progress):
     :func:`_partners_needed` tests the partners of a pair (a delay added first, explained away by
     the second-order actuator added at the same input later). The least significant one goes.
 
+    Parameters
+    ----------
+    history : list of dict
+        Each effect added: the table before it, its candidates, its parameter names, its record.
+    table, fit
+        The current table and fit (every effect in).
+    ss_with : float
+        The current fit's whitened sum of squares.
+    judge : _Judge
+    progress : callable or None
+
     Returns
     -------
     tuple or None
         ``(index in history, table, fit, residuals, reason, befores)`` of the model without it
         (``befores``: the table before each later effect, rebuilt without it), or None.
     """
-    ss_with = whitened_ss(tuple(pair_residuals(fit.model, fit.theta, judge.pairs, judge.frs)))
     n_with = _n_free(fit)
     out = None
     for i, h in enumerate(history[:-1]):
@@ -732,19 +748,6 @@ def _verification_change(before, after, alpha: float = FALSE_ALARM):
     verdict = "improved" if mean < -z * noise else ("worse" if mean > z * noise else "unchanged")
     return {"j_rms_before": sb["j_rms"], "j_rms_after": sa["j_rms"], "mean_change": mean, "noise": noise,
             "z": round(z, 3), "verdict": verdict}
-
-
-def _guideline_failures(params) -> list[str]:
-    """The accuracy guidelines (CR% <= 20, I% <= 10) each free new parameter fails, as reasons."""
-    out = []
-    for p in params:
-        if p.get("fixed"):
-            continue
-        if p["cramer_rao_pct"] is None or p["cramer_rao_pct"] > MAX_CRAMER_RAO_PCT:
-            out.append(f"{p['name']} CR% {p['cramer_rao_pct']} > {MAX_CRAMER_RAO_PCT:g}")
-        if p["insensitivity_pct"] is None or p["insensitivity_pct"] > MAX_INSENSITIVITY_PCT:
-            out.append(f"{p['name']} I% {p['insensitivity_pct']} > {MAX_INSENSITIVITY_PCT:g}")
-    return out
 
 
 #: An effect whose parameter is fixed must be clearly there: its whitened residual drop at least
@@ -850,7 +853,7 @@ def _try(table, cand, fit, judge, ss_before, ver_before):
                 shape.append(f"verification J_rms {change['j_rms_before']:.4g} -> {change['j_rms_after']:.4g}: worse "
                              f"beyond noise (mean squared-error change {change['mean_change']:.3g} > {change['z']:.2f} x "
                              f"{change['noise']:.3g})")
-        accuracy = _guideline_failures(params)
+        accuracy = guideline_failures(params)
         worst = _worst(params)
         lo, hi = band_of(pairs)
         outside = any(p["name"].startswith(FREQUENCY_PREFIXES) and not lo <= p["value"] <= hi for p in params)
