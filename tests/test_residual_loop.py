@@ -720,3 +720,30 @@ def test_an_effect_added_first_is_taken_out_when_a_later_one_explains_it():
     assert "tau_dr" not in loop.table["parameters"]
     assert "took out time_delay at dr" in loop.conclusion
     assert loop.fit.cost_average <= 0.5 * loop.steps[0].cost_before
+
+
+def test_an_effect_the_backward_step_cannot_retest_is_kept_and_said():
+    """The backward step re-fits the model without each earlier effect; when that model cannot
+    be built (here the later effect's record names a parameter the current table lacks) the
+    earlier effect stays in and the failure is returned with its kind, place and error, for the
+    record and the conclusion, not skipped silently."""
+    from livesweep.ident.residual import _backward, _Judge
+    from livesweep.ident.residual_space import pair_residuals, whitened_ss
+    from livesweep.ident.selection import effective_points
+
+    frs, _ = _data([make_effect("sensor_skew", output="p", delay_s=0.05)], seed=12)
+    t0 = _table()
+    skew = Candidate("sensor_skew", "p", {"delay_s": 0.05}, 1.0, 1)
+    t1, names1 = augment_table(t0, skew)
+    model = StateSpaceModel.from_table(t1)
+    pairs, _ = select_pairs(frs, model)
+    fit = fit_state_space(model, pairs)
+    table = table_with_fit(t1, fit)
+    judge = _Judge(pairs, frs, None, effective_points(pairs, frs.settings), 0.01)
+    ss = whitened_ss(tuple(pair_residuals(fit.model, fit.theta, pairs, frs)))
+    history = [{"table": t0, "cands": [skew], "names": names1, "effect": {"kind": "sensor_skew", "where": "p"}},
+               {"table": t1, "cands": [], "names": ["no_such_parameter"], "effect": {"kind": "x", "where": "y"}}]
+    removal, untested = _backward(history, table, fit, ss, judge, None)
+    assert removal is None
+    assert [(u["kind"], u["where"]) for u in untested] == [("sensor_skew", "p")]
+    assert "no_such_parameter" in untested[0]["error"]

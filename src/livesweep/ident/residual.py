@@ -438,7 +438,10 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                         + [p["name"] for w in rec.get("with", ()) for p in w["parameters"]]})
         cost_after = rec["cost_after"]
         n_fits += sum(len(h["cands"]) == 1 for h in history[:-1])
-        out = _backward(history, table, fit, whitened_ss(after), judge, progress) if len(history) > 1 else None
+        out, untested = (_backward(history, table, fit, whitened_ss(after), judge, progress)
+                         if len(history) > 1 else (None, []))
+        if untested:
+            effect["not_retested"] = untested
         if out is not None:
             # an effect added earlier is not significant any more: the later one explains what it did
             i, table, fit, after, why, befores = out
@@ -471,6 +474,8 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
             for e in added)
         conclusion += "".join(f"; took out {e['kind']} at {e['where']} added before ({e['removed']['reason']})"
                               for e in removed)
+        conclusion += "".join(f"; could not re-test {u['kind']} at {u['where']} once {e['kind']} at {e['where']} was "
+                              f"added ({u['error']}): kept" for e in added for u in e.get("not_retested", ()))
     elif any_significant:
         conclusion = "residual above noise, but no candidate effect passed the acceptance tests"
     else:
@@ -653,12 +658,16 @@ def _backward(history, table, fit, ss_with, judge, progress):
 
     Returns
     -------
-    tuple or None
+    removal : tuple or None
         ``(index in history, table, fit, residuals, reason, befores)`` of the model without it
         (``befores``: the table before each later effect, rebuilt without it), or None.
+    untested : list of dict
+        ``{"kind", "where", "error"}`` of each earlier effect whose re-test could not be run (the
+        model without it failed to build or fit): it stays in, and the record says so.
     """
     n_with = _n_free(fit)
     out = None
+    untested = []
     for i, h in enumerate(history[:-1]):
         if len(h["cands"]) != 1:
             continue                              # a pair stays a pair
@@ -677,7 +686,9 @@ def _backward(history, table, fit, ss_with, judge, progress):
                 for name in later["names"]:
                     t["parameters"][name] = copy.deepcopy(table["parameters"][name])
             f = fit_state_space(StateSpaceModel.from_table(t), judge.pairs, max_nfev=100)
-        except (ConfigError, np.linalg.LinAlgError, ValueError, KeyError):
+        except (ConfigError, np.linalg.LinAlgError, ValueError, KeyError) as exc:
+            untested.append({"kind": h["effect"]["kind"], "where": h["effect"]["where"],
+                             "error": f"{type(exc).__name__}: {exc}"})
             continue
         res = tuple(pair_residuals(f.model, f.theta, judge.pairs, judge.frs))
         ss = whitened_ss(res)
@@ -687,7 +698,7 @@ def _backward(history, table, fit, ss_with, judge, progress):
             why = (f"with the later effects in, it lowers the whitened residual by {max(ss - ss_with, 0.0):.0f}, "
                    f"< {sig.needed:.0f} needed for its {k} parameter(s)")
             out = (sig.p_value, i, table_with_fit(t, f), f, res, why, befores)
-    return None if out is None else out[1:]
+    return (None if out is None else out[1:]), untested
 
 
 def _as_list(v):
