@@ -111,3 +111,28 @@ def test_live_window_through_the_references_is_unbiased_too():
     assert np.median(err_dir) > 2.0 and np.median(err_ref) < 0.3 * np.median(err_dir)
     with pytest.raises(ConfigError, match="one reference per input"):
         OnlineSpectralEstimator(names, ["da", "dr"], ["p"], 50.0, (0.4, 12.0), references=["da_ref"])
+
+
+def test_an_output_no_window_resolves_loses_that_frequency_alone():
+    """T_yu = T_yr T_ur^-1 row by row: an output whose T_yr is undefined at a frequency (an
+    accelerometer with no coherence there: no window gives it weight) has no response there, and
+    every other output keeps its own, equal to numpy's solve of its row. (Before, one such output
+    took the frequency from every pair: the quadrotor's p/roll lost 20.5 and 31.9 rad/s where ax
+    and ay had no coherence, and a 30 rad/s mode on p fell in the hole.)"""
+    from livesweep.spectral.reference import combine_legs
+
+    rng = np.random.default_rng(7)
+    n_in, n_out, n = 2, 3, 6
+    Tur = rng.normal(size=(n_in, n_in, n)) + 1j * rng.normal(size=(n_in, n_in, n)) + 3 * np.eye(2)[:, :, None]
+    Tyr = rng.normal(size=(n_out, n_in, n)) + 1j * rng.normal(size=(n_out, n_in, n))
+    Tyr[2, :, 3] = np.nan                            # output 2 unresolved at frequency 3
+    pc_u, eps_u = np.full((n_in, n_in, n), 0.9), np.full((n_in, n_in, n), 0.05)
+    pc_y, eps_y = np.full((n_out, n_in, n), 0.8), np.full((n_out, n_in, n), 0.1)
+    rr = combine_legs(Tur, pc_u, eps_u, Tyr, pc_y, eps_y, np.full((n_out, n), 0.95), np.zeros(n, bool))
+    for f in range(n):
+        expect = np.linalg.solve(Tur[:, :, f].T, Tyr[:, :, f].T).T      # T_yr T_ur^-1
+        rows = [0, 1] if f == 3 else [0, 1, 2]
+        np.testing.assert_allclose(rr.H[rows, :, f], expect[rows], rtol=1e-10)
+    assert np.all(np.isnan(rr.H[2, :, 3])) and np.all(rr.coherence[2, :, 3] == 0)
+    assert np.all(np.isinf(rr.random_error[2, :, 3])) and rr.multiple_coherence[2, 3] == 0
+    assert np.all(rr.coherence[:2, :, 3] > 0) and not rr.ill_conditioned[3]

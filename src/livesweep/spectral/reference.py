@@ -112,17 +112,24 @@ def combine_legs(Tur, pc_u, eps_u, Tyr, pc_y, eps_y, multiple, ill) -> Reference
     n_out, n_in = Tyr.shape[0], Tur.shape[0]
     A = np.moveaxis(Tur, -1, 0)                       # (n, n_in, q)
     B = np.moveaxis(Tyr, -1, 0)                       # (n, n_out, q)
-    finite = np.all(np.isfinite(A), axis=(1, 2)) & np.all(np.isfinite(B), axis=(1, 2))
+    # Each output's row of T_yu = T_yr T_ur^-1 needs only its own row of T_yr: an output no
+    # window resolves at a frequency (an accelerometer with no coherence there) loses that
+    # frequency alone, not every other output's pairs with it.
+    finite = np.all(np.isfinite(A), axis=(1, 2))
+    rows = np.all(np.isfinite(B), axis=2)             # (n, n_out)
     with np.errstate(all="ignore"):
         cond = np.where(finite, np.linalg.cond(np.where(finite[:, None, None], A, np.eye(q))), np.inf)
     ok = finite & (cond < 1e8)
+    good = (ok[:, None] & rows).T                     # (n_out, n)
     H = np.full((n_out, n_in, n), np.nan + 0j)
     if np.any(ok):
         # T_yu A = B  <=>  A^T T_yu^T = B^T, solved per frequency.
-        X = np.linalg.solve(np.swapaxes(A[ok], 1, 2), np.swapaxes(B[ok], 1, 2))   # (m, q=n_in, n_out)
+        Bz = np.where(rows[ok][:, :, None], B[ok], 0.0)
+        X = np.linalg.solve(np.swapaxes(A[ok], 1, 2), np.swapaxes(Bz, 1, 2))   # (m, q=n_in, n_out)
         H[:, :, ok] = np.moveaxis(np.swapaxes(X, 1, 2), 0, -1)
+        H = np.where(good[:, None, :], H, np.nan + 0j)
     diag_pc_u = np.array([pc_u[b, b] for b in range(q)])        # (n_in, n)
     diag_eps_u = np.array([eps_u[b, b] for b in range(q)])
-    coh = np.where(ok, pc_y * diag_pc_u[None, :, :], 0.0)
-    eps = np.where(ok, np.sqrt(eps_y**2 + diag_eps_u[None, :, :] ** 2), np.inf)
-    return ReferencedResponses(H, coh, eps, np.where(ok, multiple, 0.0), ill | ~ok, Tur)
+    coh = np.where(good[:, None, :], pc_y * diag_pc_u[None, :, :], 0.0)
+    eps = np.where(good[:, None, :], np.sqrt(eps_y**2 + diag_eps_u[None, :, :] ** 2), np.inf)
+    return ReferencedResponses(H, coh, eps, np.where(good, multiple, 0.0), ill | ~ok, Tur)
