@@ -48,6 +48,8 @@ from livesweep.ident.state_space import StateSpaceModel, fit_state_space, select
 from livesweep.ident.verify import verify  # noqa: E402
 from livesweep.sim.scenario import simulate, sweep_scenario, verification_scenario  # noqa: E402
 from livesweep.spectral.analysis import analyze  # noqa: E402
+from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW  # noqa: E402
+from livesweep.spectral.windows import longest_window_samples  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -156,6 +158,16 @@ def _table(af: Airframe, case: Case) -> dict:
     return table
 
 
+def _windows_for(af: Airframe, n_samples: int, rate_hz: float):
+    """The airframe's windows and band, or, for a record too short for its longest window (a
+    ``duration_s`` condition), what the method sets for that record (docs/method.md §4.4): the
+    default windows up to half the record, and the band from three periods of the longest."""
+    half_s = longest_window_samples(n_samples) / rate_hz
+    if af.windows is None or max(af.windows) <= half_s:
+        return af.windows, af.band
+    return None, (max(af.band[0], MIN_PERIODS_PER_WINDOW * 2 * np.pi / half_s), af.band[1])
+
+
 def run_case(case: Case) -> dict:
     """Simulate, analyse, fit and run the loop on one case; a summary dict."""
     af = AIRFRAMES[case.airframe]
@@ -176,8 +188,9 @@ def run_case(case: Case) -> dict:
     x, names = _record(simulate(_shifted(sc, cond)), rate, af.references)
     x = _log_late(x, names, case, rate)
     refs = [n + "_ref" for n in af.inputs] if af.references else None
-    frs = analyze(x - x.mean(axis=1, keepdims=True), names, rate, list(af.inputs), outputs, af.band,
-                  windows_s=af.windows, references=refs).best
+    windows, band = _windows_for(af, x.shape[1], rate)
+    frs = analyze(x - x.mean(axis=1, keepdims=True), names, rate, list(af.inputs), outputs, band,
+                  windows_s=windows, references=refs).best
     check = None
     if af.verification:
         vs = verification_scenario(af.model, manoeuvres=af.verification, effects=effects, seed=case.seed + 100,
