@@ -332,9 +332,12 @@ def test_a_notch_on_clean_hover_is_not_made_acceptable_by_fixing(seed):
     assert loop.added == ()
 
 
-def _hover(effects, seed, edit=None):
+def _hover(effects, seed, edit=None, noise=1.0):
     """A hover test point (the pilot's loop closed in the simulator) with ``effects``, analysed; the
-    shipped hover case's model (changed by ``edit(table)``, if given) fitted to it."""
+    shipped hover case's model (changed by ``edit(table)``, if given) fitted to it; ``noise``
+    multiplies every sensor's noise."""
+    from dataclasses import replace
+
     case = load_case("config/xv15_hover_lateral.toml")
     table = copy.deepcopy(case.tables["state_space"])
     if edit is not None:
@@ -342,6 +345,7 @@ def _hover(effects, seed, edit=None):
     sc = sweep_scenario("xv15-hover", axes=("da", "dr"), repeats=2, omega_min_rad_s=0.2, omega_max_rad_s=12.0,
                         duration_s=100.0, amplitudes={"da": 1.5, "dr": 3.0}, off_axis_rms=0.2, seed=seed,
                         effects=tuple(effects), turbulence_scale=0.5)
+    sc = replace(sc, sensors=tuple(replace(x, noise_std=x.noise_std * noise) for x in sc.sensors))
     values, names = simulated_record(simulate(sc))
     values = values - values.mean(axis=1, keepdims=True)
     frs = analyze(values, names, 50.0, ["da", "dr"], list(table["outputs"]), (0.2, 12.0),
@@ -488,6 +492,45 @@ def test_rivals_are_those_the_data_prefer_no_more_than_an_effect_to_nothing():
     judge.n_tests = 1
     assert [r["kind"] for r in _rivals(chosen, tried, judge, n_model)] == ["actuator_lag"]
     assert _rivals({**chosen, "with": [{}]}, tried, judge, n_model) == []    # a pair: none
+
+
+def test_a_richer_rival_is_named_when_its_extra_parameters_are_not_significant():
+    """A notch (3 parameters) that explains a little more than the lag chosen (1 parameter): the
+    lag is taken because the notch's 2 extra parameters are not significant (the choice's F-test
+    with 2 parameters, scipy's F quantile here), and for that same reason the notch is named
+    beside it. (Held-out-12's 20 rad/s quadrotor notch was added as a lag with no rival named: the
+    rival rule held the notch to a one-parameter test.) Better by more than 2 parameters need, it
+    is no rival but the better model."""
+    from scipy import stats
+
+    from livesweep.ident.residual import _choose, _Judge, _rivals
+    from livesweep.ident.selection import FALSE_ALARM, NOISE_INFLATION
+
+    n_points, n_model, ss0 = 600.0, 20, 60000.0
+    judge = _Judge([], None, None, n_points, FALSE_ALARM, n_tests=30)
+    ss_lag = 6000.0
+
+    def rec(kind, ss, n_par):
+        return {"kind": kind, "where": "pitch_cmd", "evidence_after": ss0 - ss, "cost_after": 4.0, "ss_before": ss0,
+                "parameters": [{"name": f"x{k}"} for k in range(n_par)], "shape_held": True, "accepted": True,
+                "reason": "accepted"}
+
+    def need(k_extra):                      # the drop 2 extra parameters need over the lag's model
+        dof = n_points - (n_model + 1) - k_extra
+        return lambda ss_rich: NOISE_INFLATION * stats.f.isf(FALSE_ALARM, k_extra, dof) * k_extra * ss_rich / dof
+
+    # a drop between what one and what two extra parameters need: the old rule's gap
+    lo, hi = need(1)(ss_lag), need(2)(ss_lag)
+    assert lo < hi
+    drop = 0.5 * (lo + hi)
+    lag, notch = rec("actuator_lag", ss_lag, 1), rec("notch_filter", ss_lag - drop, 3)
+    assert need(2)(ss_lag - drop) > drop
+    chosen = _choose([(notch, None), (lag, None)], judge, n_model)
+    assert chosen[0] is lag
+    assert [r["kind"] for r in _rivals(lag, [lag, notch], judge, n_model)] == ["notch_filter"]
+    notch["evidence_after"] = ss0 - (ss_lag - 1.5 * need(2)(ss_lag))       # clearly better: chosen, no tie
+    assert _choose([(notch, None), (lag, None)], judge, n_model)[0] is notch
+    assert _rivals(lag, [lag, notch], judge, n_model) == []
 
 
 def test_a_sharp_mode_and_an_actuator_lag_together_are_found_as_a_pair():
@@ -747,3 +790,52 @@ def test_an_effect_the_backward_step_cannot_retest_is_kept_and_said():
     assert removal is None
     assert [(u["kind"], u["where"]) for u in untested] == [("sensor_skew", "p")]
     assert "no_such_parameter" in untested[0]["error"]
+
+
+def test_one_place_s_rival_kinds_do_not_take_every_refit_from_the_next_place():
+    """Hover with twice the sensor noise, a 0.1 s lag on da and a 50 ms skew on r. Once the lag
+    is in, the screen ranks a delay, a second-order actuator and a lag on dr (one feature, one
+    place) above the skew on r; the three refits per step went to them and a delay on dr was added
+    for the skew (held-out-12 seed 1309 of benchmarks/residual_confusion.py). The best candidate
+    at each of the first places is refitted too: the model ends with the lag and the skew, each
+    parameter within 3 Cramer-Rao bounds of its injection, the cost at least halved. (Seeds 96,
+    97 and 99 rank the skew fourth; 95 and 98 first.)"""
+    frs, table, fit = _hover([make_effect("actuator_lag", input="da", time_constant_s=0.1),
+                              make_effect("sensor_skew", output="r", delay_s=0.05)], seed=96, noise=2.0)
+    loop = run_residual_loop(table, fit, frs)
+    second = loop.steps[1]
+    ranked = [(c.kind, c.where) for c in second.candidates]
+    assert ranked.index(("sensor_skew", "r")) >= 3, ranked[:5]
+    assert sorted((e["kind"], e["where"]) for e in loop.added) == [("actuator_lag", "da"), ("sensor_skew", "r")]
+    p = {x["name"]: x for e in loop.added for x in e["parameters"]}
+    fixed = {f["name"]: f for s in loop.steps for t in s.tried if t.get("accepted") for f in t["fixed"]}
+    for name, truth in (("w_act_da", 10.0), ("skew_r", 0.05)):
+        cr = (fixed[name] if p[name]["fixed"] else p[name])["cramer_rao_pct"]     # a fixed one: its bound when fixed
+        assert abs(p[name]["value"] - truth) <= 3 * cr / 100 * p[name]["value"], (p[name], cr)
+    assert loop.fit.cost_average <= 0.5 * loop.steps[0].cost_before
+
+
+def test_a_refit_stopped_by_its_budget_is_continued_not_called_unconverged(monkeypatch):
+    """A refit inside the loop that runs out of cost evaluations while still descending is
+    continued once from where it stopped (held-out-12 seed 1310 of
+    benchmarks/residual_confusion.py: the best candidate, a delay on hover dr, was refused as "fit
+    did not converge" at a cost equal to 4e-8 of the converged one). With the budget cut to 3
+    evaluations here, the first fit stops unconverged; the continued one converges to the fit
+    run without a budget (scipy's least_squares to its own tolerances)."""
+    import livesweep.ident.residual as R
+
+    frs, _ = _data([make_effect("time_delay", input="dr", delay_s=0.08)], seed=14)
+    t0 = _table()
+    model = StateSpaceModel.from_table(t0)
+    pairs, _ = select_pairs(frs, model)
+    fit = fit_state_space(model, pairs)
+    t1, _ = augment_table(table_with_fit(t0, fit), Candidate("time_delay", "dr", {"delay_s": 0.01}, 1.0, 1))
+    m = StateSpaceModel.from_table(t1)
+    free = fit_state_space(m, pairs, max_nfev=None)
+    monkeypatch.setattr(R, "REFIT_NFEV", 3)
+    assert not fit_state_space(m, pairs, max_nfev=3).converged
+    got = R._refit(m, pairs)
+    assert got.converged
+    assert got.cost_average == pytest.approx(free.cost_average, rel=1e-8)
+    k = m.index("tau_r")
+    assert got.theta[k] == pytest.approx(free.theta[k], rel=1e-5)

@@ -376,6 +376,10 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                 if len(singles) >= n_refit:
                     break
                 single(c)
+            for c in _best_per_place(strong, n_refit):
+                # one place's rival kinds (a delay, a lag and a second-order actuator on one
+                # input) must not take every refit from the next place's best (a skew on an output)
+                single(c)
             if inadequate and not _explained(tried):
                 # a derivative the fit compensated elsewhere screens far below what its refit
                 # (restarted from the case's values) explains: each is re-identified once
@@ -490,6 +494,18 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
     criterion = {"false_alarm": judge.alpha, "effective_points": round(judge.n_points, 1),
                  "noise_inflation": NOISE_INFLATION}
     return ResidualLoop(tuple(steps), table, fit, tuple(unexplained), conclusion, n_fits, tuple(limits), criterion)
+
+
+def _best_per_place(ranked, n_places):
+    """The best-ranked candidate at each of the first ``n_places`` places of ``ranked``."""
+    out, seen = [], set()
+    for c in ranked:
+        if c.where not in seen:
+            seen.add(c.where)
+            out.append(c)
+            if len(out) == n_places:
+                break
+    return out
 
 
 #: An accepted effect that explains less than this fraction of the whitened residual drop the
@@ -613,10 +629,12 @@ def _rivals(rec, tried, judge, n_model) -> list[dict]:
     chosen one's by less than one parameter's F-test needs
     (:func:`~livesweep.ident.selection.indistinguishable`). A rival with no more parameters than
     the chosen one is held to the loop's screening level (the candidates screened counted: the
-    data prefer one to the other no more than they would prefer an effect to nothing), a richer
-    one, which nests the simpler shape and so explains at least as much, to a single test, and
-    only when it was accepted (a second-order actuator whose damping the data cannot pin down is
-    the chosen lag with a useless parameter, not an alternative)."""
+    data prefer one to the other no more than they would prefer an effect to nothing); a richer
+    one is a rival when it was accepted and its extra parameters are not significant
+    (:func:`~livesweep.ident.selection.prefers`, the test by which :func:`_choose` took the
+    simpler one: a notch that explains a little more than a lag), never when it was not accepted
+    (a second-order actuator whose damping the data cannot pin down is the chosen lag with a
+    useless parameter, not an alternative)."""
     if rec.get("with"):
         return []
     out, seen, k = [], {(rec["kind"], rec["where"])}, _size((rec, None))
@@ -624,11 +642,16 @@ def _rivals(rec, tried, judge, n_model) -> list[dict]:
         if (t is rec or not t.get("shape_held") or t.get("with") or (t["kind"], t["where"]) in seen
                 or (t["kind"] != rec["kind"] and t["where"] != rec["where"])):
             continue
-        if len(t["parameters"]) > k and not t["accepted"]:
-            continue             # the chosen shape with parameters the data cannot pin down: no alternative
-        n_tests = judge.n_tests if len(t["parameters"]) <= k else 1
-        if indistinguishable(t["ss_before"] - t["evidence_after"], rec["ss_before"] - rec["evidence_after"],
-                             judge.n_points, n_model, k, judge.alpha, n_tests):
+        ss_t, ss_rec = t["ss_before"] - t["evidence_after"], rec["ss_before"] - rec["evidence_after"]
+        if len(t["parameters"]) > k:
+            # a richer rival: the chosen shape with parameters the data cannot pin down (not
+            # accepted) is no alternative; an accepted one is when its extra parameters are not
+            # significant, the very reason _choose took the simpler
+            tie = t["accepted"] and not prefers(ss_rec, k, ss_t, len(t["parameters"]), judge.n_points, n_model,
+                                                judge.alpha)
+        else:
+            tie = indistinguishable(ss_t, ss_rec, judge.n_points, n_model, k, judge.alpha, judge.n_tests)
+        if tie:
             seen.add((t["kind"], t["where"]))
             out.append({"kind": t["kind"], "where": t["where"], "evidence_after": t["evidence_after"],
                         "cost_after": t["cost_after"], "parameters": t["parameters"], "accepted": t["accepted"]})
@@ -685,7 +708,7 @@ def _backward(history, table, fit, ss_with, judge, progress):
                     t, _ = augment_table(t, c)
                 for name in later["names"]:
                     t["parameters"][name] = copy.deepcopy(table["parameters"][name])
-            f = fit_state_space(StateSpaceModel.from_table(t), judge.pairs, max_nfev=100)
+            f = _refit(StateSpaceModel.from_table(t), judge.pairs)
         except (ConfigError, np.linalg.LinAlgError, ValueError, KeyError) as exc:
             untested.append({"kind": h["effect"]["kind"], "where": h["effect"]["where"],
                              "error": f"{type(exc).__name__}: {exc}"})
@@ -779,6 +802,24 @@ ONLY_PARAMETER_CR_PCT = 100.0 / 3.0
 FREQUENCY_PREFIXES = ("w_", "wn_")
 
 
+#: Cost evaluations of a refit inside the loop before it is continued once (:func:`_refit`).
+REFIT_NFEV = 100
+
+
+def _refit(model, pairs):
+    """A refit inside the loop: :func:`~livesweep.ident.state_space.fit_state_space` with
+    :data:`REFIT_NFEV` cost evaluations; one that budget stopped is continued once from where it
+    stopped with twice as many. A slow but steady descent (a delay on a pilot-loop axis, its
+    cost equal to 1e-8 after 100 evaluations) is not a failure to converge; a fit still not
+    settled after that is reported as one."""
+    fit = fit_state_space(model, pairs, max_nfev=REFIT_NFEV)
+    if not fit.converged:
+        more = fit_state_space(fit.model.with_values(fit.theta), pairs, max_nfev=2 * REFIT_NFEV)
+        if more.converged or more.cost_average <= fit.cost_average:
+            fit = more
+    return fit
+
+
 def _worst(params):
     """The free parameter to fix at its fitted value, or None.
 
@@ -831,11 +872,11 @@ def _try(table, cand, fit, judge, ss_before, ver_before):
             new += names
             own.append(names)
         model = StateSpaceModel.from_table(aug)
-        new_fit = fit_state_space(model, pairs, max_nfev=100)
+        new_fit = _refit(model, pairs)
         if not new_fit.converged and judge.origin is not None:
             # the model's derivatives had bent to make up for the missing effect and the refit from
             # them is stuck: start them again where the case starts them (a second start)
-            again = fit_state_space(StateSpaceModel.from_table(restart_from(aug, judge.origin)), pairs, max_nfev=100)
+            again = _refit(StateSpaceModel.from_table(restart_from(aug, judge.origin)), pairs)
             if again.converged or again.cost_average < new_fit.cost_average:
                 new_fit = again
     except (ConfigError, np.linalg.LinAlgError, ValueError) as exc:
@@ -873,8 +914,7 @@ def _try(table, cand, fit, judge, ss_before, ver_before):
             break
         # the shape is there; one parameter is poorly determined: fix it where it is, refit the rest
         try:
-            refit = fit_state_space(new_fit.model.with_values(new_fit.theta, fixed={worst["name"]: worst["value"]}),
-                                    pairs, max_nfev=100)
+            refit = _refit(new_fit.model.with_values(new_fit.theta, fixed={worst["name"]: worst["value"]}), pairs)
         except (ConfigError, np.linalg.LinAlgError, ValueError):
             break
         why = (f"CR% {worst['cramer_rao_pct']}, I% {worst['insensitivity_pct']}: poorly determined, "
