@@ -168,7 +168,9 @@ class ResidualLoop:
     steps : tuple of LoopStep
         Accepted steps, then the final step that found nothing (or nothing acceptable). A step's
         effect carries ``removes`` (kind, where, reason) when the backward step took an earlier
-        effect out after it was added, and that earlier effect ``removed`` (why, at which step).
+        effect out after it was added, or ``replaces`` (kind, where, ``by``: the simpler effect put
+        in its place, reason) when it put a simpler rival in an earlier effect's place; that
+        earlier effect carries ``removed`` (why, at which step, ``replaced_by``).
     table : dict
         The final ``[state_space]`` table (with every accepted effect, values = final fit).
     fit : StateSpaceFit
@@ -204,9 +206,12 @@ class ResidualLoop:
         step, is not listed)."""
         out = []
         for s in self.steps:
-            if s.effect is not None and "removed" not in s.effect:
-                out.append({k: v for k, v in s.effect.items() if k != "with"})
+            if s.effect is None:
+                continue
+            if "removed" not in s.effect:
+                out.append({k: v for k, v in s.effect.items() if k not in ("with", "replaces")})
                 out += list(s.effect.get("with", ()))
+            out += [e for e in _replacement(s.effect) if "removed" not in e]
         return tuple(out)
 
     def to_dict(self) -> dict:
@@ -439,7 +444,11 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
             effect["with"] = rec["with"]
         history.append({"table": table_before, "cands": cand_of[id(rec)], "effect": effect,
                         "names": [p["name"] for p in rec["parameters"]]
-                        + [p["name"] for w in rec.get("with", ()) for p in w["parameters"]]})
+                        + [p["name"] for w in rec.get("with", ()) for p in w["parameters"]],
+                        "simpler": [cand_of[id(t)][0] for t in tried
+                                    if not rec.get("with") and not t.get("with") and t.get("shape_held")
+                                    and t["where"] == rec["where"] and t["kind"] != rec["kind"]
+                                    and len(t["parameters"]) < len(rec["parameters"])]})
         cost_after = rec["cost_after"]
         n_fits += sum(len(h["cands"]) == 1 for h in history[:-1])
         out, untested = (_backward(history, table, fit, whitened_ss(after), judge, progress)
@@ -456,14 +465,29 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
             effect["removes"] = {"kind": old["kind"], "where": old["where"], "reason": why}
             ver_after = verify(fit.model, fit.theta) if verify else None
             cost_after = fit.cost_average
+        elif len(history) > 1:
+            swap = _rechoose(history, table, fit, whitened_ss(after), judge, progress)
+            n_fits += sum(len(h["simpler"]) for h in history[:-1] if len(h["cands"]) == 1)
+            if swap is not None:
+                # an earlier effect's simpler rival explains as much once the later effects are in
+                i, table, fit, after, entry, why, befores = swap
+                for h, t in zip(history[i + 1:], befores):
+                    h["table"] = t
+                old = history[i]["effect"]
+                history[i] = entry
+                old["removed"] = {"at_step": len(steps) + 1, "reason": why,
+                                  "replaced_by": f"{entry['effect']['kind']} at {entry['effect']['where']}"}
+                effect["replaces"] = {"kind": old["kind"], "where": old["where"], "by": entry["effect"], "reason": why}
+                ver_after = verify(fit.model, fit.theta) if verify else None
+                cost_after = fit.cost_average
         steps.append(LoopStep(tuple(cands), tuple(tried), effect, rec["cost_before"], cost_after,
                               _ver_summary(ver), _ver_summary(ver_after), before, after))
         ver, before = ver_after, after
     for r in before:                                  # the final fit's residual
         if r.rms_noise_units > 2.0:
             unexplained.append({"pair": f"{r.output}/{r.input}", "rms_noise_units": round(r.rms_noise_units, 2)})
-    added = [e for s in steps if s.effect is not None and "removed" not in s.effect
-             for e in (s.effect, *s.effect.get("with", ()))]
+    added = [e for s in steps if s.effect is not None
+             for e in (s.effect, *s.effect.get("with", ()), *_replacement(s.effect)) if "removed" not in e]
     removed = [s.effect for s in steps if s.effect is not None and "removed" in s.effect]
     found = {(e["kind"], e["where"]) for e in added}
     for e in added:              # a rival added at a later step was not an alternative but a second effect
@@ -477,7 +501,9 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                                                       for a in e.get("ambiguous_with", ()))
             for e in added)
         conclusion += "".join(f"; took out {e['kind']} at {e['where']} added before ({e['removed']['reason']})"
-                              for e in removed)
+                              for e in removed if not e["removed"].get("replaced_by"))
+        conclusion += "".join(f"; {e['kind']} at {e['where']} added before replaced by {e['removed']['replaced_by']} "
+                              f"({e['removed']['reason']})" for e in removed if e["removed"].get("replaced_by"))
         conclusion += "".join(f"; could not re-test {u['kind']} at {u['where']} once {e['kind']} at {e['where']} was "
                               f"added ({u['error']}): kept" for e in added for u in e.get("not_retested", ()))
     elif any_significant:
@@ -540,6 +566,10 @@ def effect_text(effect: dict) -> str:
     if "removes" in effect:
         r = effect["removes"]
         text += f"; took out {r['kind']} at {r['where']}, added before: {r['reason']}"
+    if "replaces" in effect:
+        r = effect["replaces"]
+        text += (f"; replaced {r['kind']} at {r['where']}, added before, by {r['by']['kind']} at {r['by']['where']}: "
+                 + ", ".join(par(p) for p in r["by"]["parameters"]) + f" ({r['reason']})")
     if "removed" in effect:
         text += f" (taken out at step {effect['removed']['at_step']}: {effect['removed']['reason']})"
     return text
@@ -697,17 +727,7 @@ def _backward(history, table, fit, ss_with, judge, progress):
         if progress:
             progress(f"residual loop: is {h['effect']['kind']} at {h['effect']['where']} still needed?")
         try:
-            t = copy.deepcopy(h["table"])
-            for name in t["parameters"]:          # everything else where the current fit has it
-                if name in table["parameters"] and name not in h["names"]:
-                    t["parameters"][name] = copy.deepcopy(table["parameters"][name])
-            befores = []                          # each later effect's table before it, without this one
-            for later in history[i + 1:]:
-                befores.append(copy.deepcopy(t))
-                for c in later["cands"]:
-                    t, _ = augment_table(t, c)
-                for name in later["names"]:
-                    t["parameters"][name] = copy.deepcopy(table["parameters"][name])
+            t, befores, _ = _rebuild(history, i, table)
             f = _refit(StateSpaceModel.from_table(t), judge.pairs)
         except (ConfigError, np.linalg.LinAlgError, ValueError, KeyError) as exc:
             untested.append({"kind": h["effect"]["kind"], "where": h["effect"]["where"],
@@ -722,6 +742,82 @@ def _backward(history, table, fit, ss_with, judge, progress):
                    f"< {sig.needed:.0f} needed for its {k} parameter(s)")
             out = (sig.p_value, i, table_with_fit(t, f), f, res, why, befores)
     return (None if out is None else out[1:]), untested
+
+
+def _replacement(effect) -> tuple:
+    """The simpler effect a step put in an earlier one's place (:func:`_rechoose`), if any."""
+    return (effect["replaces"]["by"],) if effect.get("replaces") else ()
+
+
+def _rebuild(history, i, table, replacement=None):
+    """The current model without ``history[i]`` (or with ``replacement``, a Candidate, in its
+    place): the table before it, every other parameter at its current value, the later effects
+    added again at their fitted values. Returns the table and each later effect's table before
+    it (rebuilt the same way), and the replacement's parameter names."""
+    h = history[i]
+    t = copy.deepcopy(h["table"])
+    for name in t["parameters"]:          # everything else where the current fit has it
+        if name in table["parameters"] and name not in h["names"]:
+            t["parameters"][name] = copy.deepcopy(table["parameters"][name])
+    names = []
+    if replacement is not None:
+        t, names = augment_table(t, replacement)
+    befores = []
+    for later in history[i + 1:]:
+        befores.append(copy.deepcopy(t))
+        for c in later["cands"]:
+            t, _ = augment_table(t, c)
+        for name in later["names"]:
+            t["parameters"][name] = copy.deepcopy(table["parameters"][name])
+    return t, befores, names
+
+
+def _rechoose(history, table, fit, ss_with, judge, progress):
+    """Re-choose an earlier effect's kind once the later effects are in.
+
+    At its step an effect was chosen over simpler rivals at the same place (a second-order
+    actuator on da over a delay) by what it explained then; an effect added later (a sharp mode
+    on p the actuator's resonance had partly stood in for) can take that advantage away. Each
+    earlier single effect's simpler rivals whose shape held at its step are refitted in its place
+    with the later effects in; when the earlier effect's extra parameters are then not
+    significant (:func:`~livesweep.ident.selection.prefers`, the test :func:`_choose` chose by),
+    the simpler rival replaces it, provided its refit converges and meets the accuracy
+    guidelines. The best such replacement (lowest sum of squares) is returned.
+
+    Returns
+    -------
+    tuple or None
+        ``(index in history, table, fit, residuals, history entry of the replacement, reason,
+        befores)``, or None.
+    """
+    n_with = _n_free(fit)
+    best = None
+    for i, h in enumerate(history[:-1]):
+        if len(h["cands"]) != 1:
+            continue
+        k = len(h["names"])
+        for alt in h["simpler"]:
+            if progress:
+                progress(f"residual loop: would {alt.kind} at {alt.where} do for {h['effect']['kind']} now?")
+            try:
+                t, befores, names = _rebuild(history, i, table, alt)
+                f = _refit(StateSpaceModel.from_table(t), judge.pairs)
+            except (ConfigError, np.linalg.LinAlgError, ValueError, KeyError):
+                continue                          # not a replacement; the effect stays as chosen
+            params = parameter_report(f, names)
+            if not f.converged or guideline_failures(params):
+                continue
+            res = tuple(pair_residuals(f.model, f.theta, judge.pairs, judge.frs))
+            ss = whitened_ss(res)
+            if prefers(ss, len(names), ss_with, k, judge.n_points, n_with - k, judge.alpha):
+                continue
+            if best is None or ss < best[0]:
+                why = (f"with the later effects in, {alt.kind} leaves {max(ss - ss_with, 0.0):.0f} more whitened "
+                       f"residual than {h['effect']['kind']}, not significant for {k - len(names)} parameter(s) more")
+                entry = {"table": h["table"], "cands": [alt], "names": names, "simpler": [],
+                         "effect": {"kind": alt.kind, "where": alt.where, "parameters": params}}
+                best = (ss, i, table_with_fit(t, f), f, res, entry, why, befores)
+    return None if best is None else best[1:]
 
 
 def _as_list(v):

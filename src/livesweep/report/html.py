@@ -305,7 +305,9 @@ def _residual(report: dict) -> str:
                       f"{st['cost_after']:.2f}{ver}. {why}</p>"
                       + (f"<ul>{tried}</ul>" if tried else "") + _img(st.get("plot"), 1100, f"residual step {k + 1}"))
     if rl.get("parameter_units") and rl.get("augmented_case"):
-        kept = (st["effect"] for st in rl["steps"] if st["effect"] and "removed" not in st["effect"])
+        kept = [e_ for st in rl["steps"] if st["effect"]
+                for e_ in (st["effect"], *((st["effect"]["replaces"]["by"],) if st["effect"].get("replaces") else ()))
+                if "removed" not in e_]
         final = {p["name"]: p for e_ in kept
                  for p in [*e_["parameters"], *(q for w in e_.get("with", ()) for q in w["parameters"])]}
         if final:
