@@ -12,7 +12,7 @@ injected that the airframe's shipped case does not declare; the loop runs on the
     python benchmarks/residual_confusion.py --held-out-3  # the third (see HELD_OUT_3)
     python benchmarks/residual_confusion.py --held-out-4  # the fourth (see HELD_OUT_4)
     python benchmarks/residual_confusion.py --held-out-5  # the fifth (see HELD_OUT_5)
-    python benchmarks/residual_confusion.py --held-out-6  # the sixth (see HELD_OUT_6), and so on to --held-out-13
+    python benchmarks/residual_confusion.py --held-out-6  # the sixth (see HELD_OUT_6), and so on to --held-out-14
     python benchmarks/residual_confusion.py -j 2 --only hover
 
 The calibration set (clean XV-15 cruise, seeds 30-43 at full and half turbulence) is the only
@@ -1459,6 +1459,105 @@ HELD_OUT_13_CLEAN = ([Case(f"clean hover seed {s}", "hover", s) for s in range(1
                         for s, c in zip(range(1424, 1428), (_LOG100, _TIGHT, _NOISY2, _FAST_GUSTS))])
 
 
+# Held-out-14 (written and committed before any of it was run; run once): the code after
+# held-out-13's change (an earlier effect replaced by its simpler rival once a later one is in).
+# Seeds 1501-1527, 6 pairs, magnitudes unlike held-out-13's, some cases under shifted conditions.
+HELD_OUT_14 = [
+    Case("hover 2nd-order 8.5 rad/s zeta 0.55 da", "hover", 1501,
+         (_e("actuator_second_order", input="da", omega_rad_s=8.5, zeta=0.55),), {("actuator_second_order", "da")},
+         {"wn_act_da": 8.5, "zeta_act_da": 0.55}),
+    Case("hover delay 45 ms dr", "hover", 1502, (_e("time_delay", input="dr", delay_s=0.045),), {("time_delay", "dr")},
+         {"tau_dr": 0.045}),
+    Case("hover lag 0.07 s da, loose pilot", "hover", 1503, (_e("actuator_lag", input="da", time_constant_s=0.07),),
+         {("actuator_lag", "da")}, {"w_act_da": 1 / 0.07}, conditions=_LOOSE),
+    Case("hover notch 6 rad/s depth 0.75 da", "hover", 1504,
+         (_e("notch_filter", input="da", omega_rad_s=6.0, zeta=0.25, depth=0.75),), {("notch_filter", "da")},
+         {"w_notch_da": 6.0, "zeta_notch_da": 0.25, "depth_notch_da": 0.75}),
+    Case("hover mode p 11 rad/s zeta 0.05/0.15", "hover", 1505,
+         (_e("structural_mode", output="p", omega_rad_s=11.0, zeta_pole=0.05, zeta_zero=0.15),),
+         {("structural_mode", "p")}, {"w_mode_p": 11.0, "zeta_mode_p": 0.05, "zeta_zero_mode_p": 0.15}),
+    Case("hover skew 45 ms r, slow gusts", "hover", 1506, (_e("sensor_skew", output="r", delay_s=0.045),),
+         {("sensor_skew", "r")}, {"skew_r": 0.045}, conditions=_SLOW_GUSTS),
+    Case("hover scale 0.8 p", "hover", 1507, (_e("scale_factor", output="p", factor=0.8),),
+         {("scale_factor", "p")}, {"k_p": 0.8}),
+    Case("hover missing Lp", "hover", 1508, (), {("missing_derivative", "F[p][p]")}, {"F_p_p": -0.2365},
+         (("drop", "F", "p", "p", "Lp"),)),
+    Case("hover lag dr + mode phi", "hover", 1509,
+         (_e("actuator_lag", input="dr", time_constant_s=0.1),
+          _e("structural_mode", output="phi", omega_rad_s=8.0, zeta_pole=0.05, zeta_zero=0.15)),
+         {("actuator_lag", "dr"), ("structural_mode", "phi")}, {"w_act_dr": 10.0, "w_mode_phi": 8.0}),
+    Case("hover 2nd-order da + skew p, noise x2", "hover", 1510,
+         (_e("actuator_second_order", input="da", omega_rad_s=9.0, zeta=0.6),
+          _e("sensor_skew", output="p", delay_s=0.04)),
+         {("actuator_second_order", "da"), ("sensor_skew", "p")}, {"wn_act_da": 9.0, "skew_p": 0.04},
+         conditions=_NOISY2),
+    Case("cruise 2nd-order 12 rad/s zeta 0.6 da", "cruise", 1501,
+         (_e("actuator_second_order", input="da", omega_rad_s=12.0, zeta=0.6),), {("actuator_second_order", "da")},
+         {"wn_act_da": 12.0, "zeta_act_da": 0.6}),
+    Case("cruise delay 50 ms da, noise x2", "cruise", 1502, (_e("time_delay", input="da", delay_s=0.05),),
+         {("time_delay", "da")}, {"tau_a": TAU_A + 0.05}, (("fix", "tau_a", TAU_A),), conditions=_NOISY2),
+    Case("cruise lag 0.09 s dr", "cruise", 1503, (_e("actuator_lag", input="dr", time_constant_s=0.09),),
+         {("actuator_lag", "dr")}, {"w_act_dr": 1 / 0.09}),
+    Case("cruise notch 8 rad/s depth 0.7 dr", "cruise", 1504,
+         (_e("notch_filter", input="dr", omega_rad_s=8.0, zeta=0.3, depth=0.7),), {("notch_filter", "dr")},
+         {"w_notch_dr": 8.0, "zeta_notch_dr": 0.3, "depth_notch_dr": 0.7}),
+    Case("cruise mode r 10 rad/s zeta 0.05/0.15, turbulence 1.0", "cruise", 1505,
+         (_e("structural_mode", output="r", omega_rad_s=10.0, zeta_pole=0.05, zeta_zero=0.15),),
+         {("structural_mode", "r")}, {"w_mode_r": 10.0, "zeta_mode_r": 0.05, "zeta_zero_mode_r": 0.15}, turbulence=1.0),
+    Case("cruise skew 35 ms p", "cruise", 1506, (_e("sensor_skew", output="p", delay_s=0.035),),
+         {("sensor_skew", "p")}, {"skew_p": 0.035}),
+    Case("cruise scale 0.85 p", "cruise", 1507, (_e("scale_factor", output="p", factor=0.85),),
+         {("scale_factor", "p")}, {"k_p": 0.85}),
+    Case("cruise missing Lp", "cruise", 1508, (), {("missing_derivative", "F[p][p]")}, {"F_p_p": -0.678},
+         (("drop", "F", "p", "p", "Lp"),)),
+    Case("cruise notch da + mode r", "cruise", 1509,
+         (_e("notch_filter", input="da", omega_rad_s=6.0, zeta=0.3, depth=0.7),
+          _e("structural_mode", output="r", omega_rad_s=12.0, zeta_pole=0.05, zeta_zero=0.15)),
+         {("notch_filter", "da"), ("structural_mode", "r")}, {"w_notch_da": 6.0, "w_mode_r": 12.0}),
+    Case("cruise lag da + skew r, fast gusts", "cruise", 1510,
+         (_e("actuator_lag", input="da", time_constant_s=0.08), _e("sensor_skew", output="r", delay_s=0.05)),
+         {("actuator_lag", "da"), ("sensor_skew", "r")}, {"w_act_da": 12.5, "skew_r": 0.05}, conditions=_FAST_GUSTS),
+    Case("quad 2nd-order 20 rad/s zeta 0.5 roll", "quad", 1501,
+         (_e("actuator_second_order", input="roll_cmd", omega_rad_s=20.0, zeta=0.5),),
+         {("actuator_second_order", "roll_cmd")}, {"wn_act_roll_cmd": 20.0, "zeta_act_roll_cmd": 0.5}),
+    Case("quad delay 20 ms roll", "quad", 1502, (_e("time_delay", input="roll_cmd", delay_s=0.02),),
+         {("time_delay", "roll_cmd")}, {"tau_roll": TAU_Q + 0.02}),
+    Case("quad lag 25 ms pitch, small sweeps", "quad", 1503,
+         (_e("actuator_lag", input="pitch_cmd", time_constant_s=0.025),), {("actuator_lag", "pitch_cmd")},
+         {"w_act_pitch_cmd": 40.0}, conditions=_SMALL),
+    Case("quad notch 25 rad/s depth 0.6 roll", "quad", 1504,
+         (_e("notch_filter", input="roll_cmd", omega_rad_s=25.0, zeta=0.3, depth=0.6),), {("notch_filter", "roll_cmd")},
+         {"w_notch_roll_cmd": 25.0, "zeta_notch_roll_cmd": 0.3, "depth_notch_roll_cmd": 0.6}),
+    Case("quad mode p 22 rad/s zeta 0.05/0.15", "quad", 1505,
+         (_e("structural_mode", output="p", omega_rad_s=22.0, zeta_pole=0.05, zeta_zero=0.15),),
+         {("structural_mode", "p")}, {"w_mode_p": 22.0, "zeta_mode_p": 0.05, "zeta_zero_mode_p": 0.15}),
+    Case("quad skew 20 ms theta, logged at 100 Hz", "quad", 1506, (_e("sensor_skew", output="theta", delay_s=0.02),),
+         {("sensor_skew", "theta")}, {"skew_theta": 0.02}, conditions=_LOG100),
+    Case("quad scale 1.2 phi", "quad", 1507, (_e("scale_factor", output="phi", factor=1.2),),
+         {("scale_factor", "phi")}, {"k_phi": 1.2}),
+    Case("quad missing Mq", "quad", 1508, (), {("missing_derivative", "F[q][q]")}, {"F_q_q": -3.4},
+         (("drop", "F", "q", "q", "Mq"),)),
+    Case("quad delay pitch + mode q", "quad", 1509,
+         (_e("time_delay", input="pitch_cmd", delay_s=0.02),
+          _e("structural_mode", output="q", omega_rad_s=28.0, zeta_pole=0.05, zeta_zero=0.15)),
+         {("time_delay", "pitch_cmd"), ("structural_mode", "q")}, {"tau_pitch": TAU_Q + 0.02, "w_mode_q": 28.0}),
+    Case("quad notch roll + skew p, noise x2", "quad", 1510,
+         (_e("notch_filter", input="roll_cmd", omega_rad_s=12.0, zeta=0.3, depth=0.7),
+          _e("sensor_skew", output="p", delay_s=0.015)),
+         {("notch_filter", "roll_cmd"), ("sensor_skew", "p")}, {"w_notch_roll_cmd": 12.0, "skew_p": 0.015},
+         conditions=_NOISY2),
+]
+HELD_OUT_14_CLEAN = ([Case(f"clean hover seed {s}", "hover", s) for s in range(1520, 1524)]
+                     + [Case(f"clean hover seed {s} {dict(c)}", "hover", s, conditions=c)
+                        for s, c in zip(range(1524, 1528), (_NOISY, _TIGHT, _SLOW_GUSTS, _SMALL))]
+                     + [Case(f"clean cruise seed {s}", "cruise", s) for s in range(1520, 1524)]
+                     + [Case(f"clean cruise seed {s} {dict(c)}", "cruise", s, conditions=c)
+                        for s, c in zip(range(1524, 1528), (_NOISY2, _FAST_GUSTS, _SHORT, _SMALL))]
+                     + [Case(f"clean quad seed {s}", "quad", s) for s in range(1520, 1524)]
+                     + [Case(f"clean quad seed {s} {dict(c)}", "quad", s, conditions=c)
+                        for s, c in zip(range(1524, 1528), (_NOISY, _LOOSE, _SHORT, _LOG100))])
+
+
 def _summary(results, clean):
     """(right, named, confusion): ``right`` counts the cases whose added effects are exactly the
     injected ones (or a scale error reported as one the data cannot show); ``named`` also counts
@@ -1525,6 +1624,8 @@ def main(argv=None) -> None:
                          "(noise, gusts, sweep size and length, pilot, log rate)")
     ap.add_argument("--held-out-13", action="store_true",
                     help="the thirteenth held-out set (written after held-out-12's changes, before running them on it)")
+    ap.add_argument("--held-out-14", action="store_true",
+                    help="the fourteenth held-out set (written after held-out-13's change, before running it on it)")
     ap.add_argument("--held-out-11", action="store_true",
                     help="run the eleventh held-out set (written before the backward step, stop 27)")
     ap.add_argument("-j", type=int, default=1, help="processes")
@@ -1541,7 +1642,8 @@ def main(argv=None) -> None:
              else HELD_OUT_10 + HELD_OUT_10_CLEAN if a.held_out_10
              else HELD_OUT_11 + HELD_OUT_11_CLEAN if a.held_out_11
              else HELD_OUT_12 + HELD_OUT_12_CLEAN if a.held_out_12
-             else HELD_OUT_13 + HELD_OUT_13_CLEAN if a.held_out_13 else HELD_OUT + HELD_OUT_CLEAN)
+             else HELD_OUT_13 + HELD_OUT_13_CLEAN if a.held_out_13
+             else HELD_OUT_14 + HELD_OUT_14_CLEAN if a.held_out_14 else HELD_OUT + HELD_OUT_CLEAN)
     if a.only:
         cases = [c for c in cases if a.only == c.airframe or a.only in c.name]
     t0 = time.perf_counter()
