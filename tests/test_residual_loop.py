@@ -868,4 +868,5 @@ def test_an_earlier_effect_is_replaced_by_its_simpler_rival_once_a_later_one_is_
     assert "tau_da" in loop.table["parameters"] and "wn_act_da" not in loop.table["parameters"]
     assert "actuator_second_order at da added before replaced by time_delay at da" in loop.conclusion
     assert "replaced actuator_second_order at da, added before, by time_delay at da" in effect_text(second)
+    assert "(replaced by time_delay at da at step 2:" in effect_text(first)
     assert loop.fit.cost_average <= 0.5 * loop.steps[0].cost_before

@@ -397,6 +397,15 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                 for c in ranked:
                     if EFFECT_KINDS[c.kind].acts_on == "input":
                         single(c)
+            for rec_, _ in list(accepted):
+                # simplest first needs the simpler kinds at an accepted effect's place refitted too,
+                # whatever their screen said (a delay screened below its test beside an accepted
+                # second-order actuator on the same input)
+                if not rec_.get("with"):
+                    for c in ranked:
+                        if (c.where, c.kind) != (rec_["where"], rec_["kind"]) and c.where == rec_["where"] \
+                                and c.n_parameters < len(rec_["parameters"]):
+                            single(c)
             leader = max(tried, key=lambda t: t.get("evidence_after", -np.inf), default=None)
             duo = []
             if leader is not None and not leader["accepted"] and len(steps) + 2 <= max_steps:
@@ -446,7 +455,7 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                         "names": [p["name"] for p in rec["parameters"]]
                         + [p["name"] for w in rec.get("with", ()) for p in w["parameters"]],
                         "simpler": [cand_of[id(t)][0] for t in tried
-                                    if not rec.get("with") and not t.get("with") and t.get("shape_held")
+                                    if not rec.get("with") and not t.get("with") and t.get("parameters")
                                     and t["where"] == rec["where"] and t["kind"] != rec["kind"]
                                     and len(t["parameters"]) < len(rec["parameters"])]})
         cost_after = rec["cost_after"]
@@ -571,7 +580,9 @@ def effect_text(effect: dict) -> str:
         text += (f"; replaced {r['kind']} at {r['where']}, added before, by {r['by']['kind']} at {r['by']['where']}: "
                  + ", ".join(par(p) for p in r["by"]["parameters"]) + f" ({r['reason']})")
     if "removed" in effect:
-        text += f" (taken out at step {effect['removed']['at_step']}: {effect['removed']['reason']})"
+        r = effect["removed"]
+        how = f"replaced by {r['replaced_by']}" if r.get("replaced_by") else "taken out"
+        text += f" ({how} at step {r['at_step']}: {r['reason']})"
     return text
 
 
@@ -778,7 +789,8 @@ def _rechoose(history, table, fit, ss_with, judge, progress):
     At its step an effect was chosen over simpler rivals at the same place (a second-order
     actuator on da over a delay) by what it explained then; an effect added later (a sharp mode
     on p the actuator's resonance had partly stood in for) can take that advantage away. Each
-    earlier single effect's simpler rivals whose shape held at its step are refitted in its place
+    earlier single effect's simpler rivals refitted at its step (whatever that refit's own test
+    said: alone, before the later effects, it may have explained too little) are refitted in its place
     with the later effects in; when the earlier effect's extra parameters are then not
     significant (:func:`~livesweep.ident.selection.prefers`, the test :func:`_choose` chose by),
     the simpler rival replaces it, provided its refit converges and meets the accuracy
