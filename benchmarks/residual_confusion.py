@@ -12,7 +12,7 @@ injected that the airframe's shipped case does not declare; the loop runs on the
     python benchmarks/residual_confusion.py --held-out-3  # the third (see HELD_OUT_3)
     python benchmarks/residual_confusion.py --held-out-4  # the fourth (see HELD_OUT_4)
     python benchmarks/residual_confusion.py --held-out-5  # the fifth (see HELD_OUT_5)
-    python benchmarks/residual_confusion.py --held-out-6  # the sixth (see HELD_OUT_6), and so on to --held-out-14
+    python benchmarks/residual_confusion.py --held-out-6  # the sixth (see HELD_OUT_6), and so on to --held-out-15
     python benchmarks/residual_confusion.py -j 2 --only hover
 
 The calibration set (clean XV-15 cruise, seeds 30-43 at full and half turbulence) is the only
@@ -1558,6 +1558,105 @@ HELD_OUT_14_CLEAN = ([Case(f"clean hover seed {s}", "hover", s) for s in range(1
                         for s, c in zip(range(1524, 1528), (_NOISY, _LOOSE, _SHORT, _LOG100))])
 
 
+# Held-out-15 (written and committed before any of it was run; run once): the code after the
+# replacement step was widened (the simpler kinds at an accepted effect's place refitted whatever
+# their screen said, and any of them a replacement candidate). Seeds 1601-1627, 6 pairs.
+HELD_OUT_15 = [
+    Case("hover 2nd-order 6.5 rad/s zeta 0.65 da", "hover", 1601,
+         (_e("actuator_second_order", input="da", omega_rad_s=6.5, zeta=0.65),), {("actuator_second_order", "da")},
+         {"wn_act_da": 6.5, "zeta_act_da": 0.65}),
+    Case("hover delay 70 ms dr", "hover", 1602, (_e("time_delay", input="dr", delay_s=0.07),), {("time_delay", "dr")},
+         {"tau_dr": 0.07}),
+    Case("hover lag 0.09 s da", "hover", 1603, (_e("actuator_lag", input="da", time_constant_s=0.09),),
+         {("actuator_lag", "da")}, {"w_act_da": 1 / 0.09}),
+    Case("hover notch 3.5 rad/s depth 0.6 dr, tight pilot", "hover", 1604,
+         (_e("notch_filter", input="dr", omega_rad_s=3.5, zeta=0.3, depth=0.6),), {("notch_filter", "dr")},
+         {"w_notch_dr": 3.5, "zeta_notch_dr": 0.3, "depth_notch_dr": 0.6}, conditions=_TIGHT),
+    Case("hover mode phi 10 rad/s zeta 0.05/0.2, noise x2", "hover", 1605,
+         (_e("structural_mode", output="phi", omega_rad_s=10.0, zeta_pole=0.05, zeta_zero=0.2),),
+         {("structural_mode", "phi")}, {"w_mode_phi": 10.0, "zeta_mode_phi": 0.05, "zeta_zero_mode_phi": 0.2},
+         conditions=_NOISY2),
+    Case("hover skew 55 ms phi", "hover", 1606, (_e("sensor_skew", output="phi", delay_s=0.055),),
+         {("sensor_skew", "phi")}, {"skew_phi": 0.055}),
+    Case("hover scale 1.35 v", "hover", 1607, (_e("scale_factor", output="v", factor=1.35),),
+         {("scale_factor", "v")}, {"k_v": 1.35}),
+    Case("hover missing Ndr", "hover", 1608, (), {("missing_derivative", "G[r][dr]")}, {"G_r_dr": 0.01187},
+         (("drop", "G", "r", "dr", "Ndr"),)),
+    Case("hover 2nd-order dr + mode p", "hover", 1609,
+         (_e("actuator_second_order", input="dr", omega_rad_s=7.0, zeta=0.5),
+          _e("structural_mode", output="p", omega_rad_s=9.0, zeta_pole=0.05, zeta_zero=0.15)),
+         {("actuator_second_order", "dr"), ("structural_mode", "p")}, {"wn_act_dr": 7.0, "w_mode_p": 9.0}),
+    Case("hover delay da + skew r, slow gusts", "hover", 1610,
+         (_e("time_delay", input="da", delay_s=0.04), _e("sensor_skew", output="r", delay_s=0.06)),
+         {("time_delay", "da"), ("sensor_skew", "r")}, {"tau_da": 0.04, "skew_r": 0.06}, conditions=_SLOW_GUSTS),
+    Case("cruise 2nd-order 9 rad/s zeta 0.45 da", "cruise", 1601,
+         (_e("actuator_second_order", input="da", omega_rad_s=9.0, zeta=0.45),), {("actuator_second_order", "da")},
+         {"wn_act_da": 9.0, "zeta_act_da": 0.45}),
+    Case("cruise delay 30 ms da", "cruise", 1602, (_e("time_delay", input="da", delay_s=0.03),),
+         {("time_delay", "da")}, {"tau_a": TAU_A + 0.03}, (("fix", "tau_a", TAU_A),)),
+    Case("cruise lag 0.11 s dr", "cruise", 1603, (_e("actuator_lag", input="dr", time_constant_s=0.11),),
+         {("actuator_lag", "dr")}, {"w_act_dr": 1 / 0.11}),
+    Case("cruise notch 12 rad/s depth 0.65 da, noise x2", "cruise", 1604,
+         (_e("notch_filter", input="da", omega_rad_s=12.0, zeta=0.3, depth=0.65),), {("notch_filter", "da")},
+         {"w_notch_da": 12.0, "zeta_notch_da": 0.3, "depth_notch_da": 0.65}, conditions=_NOISY2),
+    Case("cruise mode p 9 rad/s zeta 0.05/0.15", "cruise", 1605,
+         (_e("structural_mode", output="p", omega_rad_s=9.0, zeta_pole=0.05, zeta_zero=0.15),),
+         {("structural_mode", "p")}, {"w_mode_p": 9.0, "zeta_mode_p": 0.05, "zeta_zero_mode_p": 0.15}),
+    Case("cruise skew 55 ms r", "cruise", 1606, (_e("sensor_skew", output="r", delay_s=0.055),),
+         {("sensor_skew", "r")}, {"skew_r": 0.055}),
+    Case("cruise scale 1.3 p, turbulence 1.0", "cruise", 1607, (_e("scale_factor", output="p", factor=1.3),),
+         {("scale_factor", "p")}, {"k_p": 1.3}, turbulence=1.0),
+    Case("cruise missing Nda", "cruise", 1608, (), {("missing_derivative", "G[r][da]")}, {"G_r_da": -0.02166},
+         (("drop", "G", "r", "da", "Nda"),)),
+    Case("cruise delay dr + mode r", "cruise", 1609,
+         (_e("time_delay", input="dr", delay_s=0.05),
+          _e("structural_mode", output="r", omega_rad_s=14.0, zeta_pole=0.05, zeta_zero=0.15)),
+         {("time_delay", "dr"), ("structural_mode", "r")}, {"tau_r": TAU_R + 0.05, "w_mode_r": 14.0},
+         (("fix", "tau_r", TAU_R),)),
+    Case("cruise notch dr + skew p", "cruise", 1610,
+         (_e("notch_filter", input="dr", omega_rad_s=6.0, zeta=0.3, depth=0.7), _e("sensor_skew", output="p", delay_s=0.04)),
+         {("notch_filter", "dr"), ("sensor_skew", "p")}, {"w_notch_dr": 6.0, "skew_p": 0.04}),
+    Case("quad 2nd-order 40 rad/s zeta 0.6 pitch", "quad", 1601,
+         (_e("actuator_second_order", input="pitch_cmd", omega_rad_s=40.0, zeta=0.6),),
+         {("actuator_second_order", "pitch_cmd")}, {"wn_act_pitch_cmd": 40.0, "zeta_act_pitch_cmd": 0.6}),
+    Case("quad delay 30 ms roll", "quad", 1602, (_e("time_delay", input="roll_cmd", delay_s=0.03),),
+         {("time_delay", "roll_cmd")}, {"tau_roll": TAU_Q + 0.03}),
+    Case("quad lag 35 ms roll, noise x2", "quad", 1603, (_e("actuator_lag", input="roll_cmd", time_constant_s=0.035),),
+         {("actuator_lag", "roll_cmd")}, {"w_act_roll_cmd": 1 / 0.035}, conditions=_NOISY2),
+    Case("quad notch 18 rad/s depth 0.7 pitch", "quad", 1604,
+         (_e("notch_filter", input="pitch_cmd", omega_rad_s=18.0, zeta=0.25, depth=0.7),), {("notch_filter", "pitch_cmd")},
+         {"w_notch_pitch_cmd": 18.0, "zeta_notch_pitch_cmd": 0.25, "depth_notch_pitch_cmd": 0.7}),
+    Case("quad mode q 24 rad/s zeta 0.05/0.15, fast gusts", "quad", 1605,
+         (_e("structural_mode", output="q", omega_rad_s=24.0, zeta_pole=0.05, zeta_zero=0.15),),
+         {("structural_mode", "q")}, {"w_mode_q": 24.0, "zeta_mode_q": 0.05, "zeta_zero_mode_q": 0.15},
+         conditions=_FAST_GUSTS),
+    Case("quad skew 30 ms q", "quad", 1606, (_e("sensor_skew", output="q", delay_s=0.03),),
+         {("sensor_skew", "q")}, {"skew_q": 0.03}),
+    Case("quad scale 0.8 p", "quad", 1607, (_e("scale_factor", output="p", factor=0.8),),
+         {("scale_factor", "p")}, {"k_p": 0.8}),
+    Case("quad missing Lroll", "quad", 1608, (), {("missing_derivative", "G[p][roll_cmd]")}, {"G_p_roll_cmd": 40.0},
+         (("drop", "G", "p", "roll_cmd", "Lroll"),)),
+    Case("quad 2nd-order roll + mode p", "quad", 1609,
+         (_e("actuator_second_order", input="roll_cmd", omega_rad_s=25.0, zeta=0.5),
+          _e("structural_mode", output="p", omega_rad_s=30.0, zeta_pole=0.05, zeta_zero=0.15)),
+         {("actuator_second_order", "roll_cmd"), ("structural_mode", "p")},
+         {"wn_act_roll_cmd": 25.0, "w_mode_p": 30.0}),
+    Case("quad lag pitch + skew phi, logged at 100 Hz", "quad", 1610,
+         (_e("actuator_lag", input="pitch_cmd", time_constant_s=0.03), _e("sensor_skew", output="phi", delay_s=0.02)),
+         {("actuator_lag", "pitch_cmd"), ("sensor_skew", "phi")}, {"w_act_pitch_cmd": 1 / 0.03, "skew_phi": 0.02},
+         conditions=_LOG100),
+]
+HELD_OUT_15_CLEAN = ([Case(f"clean hover seed {s}", "hover", s) for s in range(1620, 1624)]
+                     + [Case(f"clean hover seed {s} {dict(c)}", "hover", s, conditions=c)
+                        for s, c in zip(range(1624, 1628), (_FAST_GUSTS, _NOISY2, _SHORT, _LOOSE))]
+                     + [Case(f"clean cruise seed {s}", "cruise", s) for s in range(1620, 1624)]
+                     + [Case(f"clean cruise seed {s} {dict(c)}", "cruise", s, conditions=c)
+                        for s, c in zip(range(1624, 1628), (_NOISY, _SLOW_GUSTS, _SMALL, _FAST_GUSTS))]
+                     + [Case(f"clean quad seed {s}", "quad", s) for s in range(1620, 1624)]
+                     + [Case(f"clean quad seed {s} {dict(c)}", "quad", s, conditions=c)
+                        for s, c in zip(range(1624, 1628), (_SLOW_GUSTS, _SMALL, _TIGHT, _NOISY))])
+
+
 def _summary(results, clean):
     """(right, named, confusion): ``right`` counts the cases whose added effects are exactly the
     injected ones (or a scale error reported as one the data cannot show); ``named`` also counts
@@ -1626,6 +1725,8 @@ def main(argv=None) -> None:
                     help="the thirteenth held-out set (written after held-out-12's changes, before running them on it)")
     ap.add_argument("--held-out-14", action="store_true",
                     help="the fourteenth held-out set (written after held-out-13's change, before running it on it)")
+    ap.add_argument("--held-out-15", action="store_true",
+                    help="the fifteenth held-out set (written after the replacement step was widened, before running it)")
     ap.add_argument("--held-out-11", action="store_true",
                     help="run the eleventh held-out set (written before the backward step, stop 27)")
     ap.add_argument("-j", type=int, default=1, help="processes")
@@ -1643,7 +1744,8 @@ def main(argv=None) -> None:
              else HELD_OUT_11 + HELD_OUT_11_CLEAN if a.held_out_11
              else HELD_OUT_12 + HELD_OUT_12_CLEAN if a.held_out_12
              else HELD_OUT_13 + HELD_OUT_13_CLEAN if a.held_out_13
-             else HELD_OUT_14 + HELD_OUT_14_CLEAN if a.held_out_14 else HELD_OUT + HELD_OUT_CLEAN)
+             else HELD_OUT_14 + HELD_OUT_14_CLEAN if a.held_out_14
+             else HELD_OUT_15 + HELD_OUT_15_CLEAN if a.held_out_15 else HELD_OUT + HELD_OUT_CLEAN)
     if a.only:
         cases = [c for c in cases if a.only == c.airframe or a.only in c.name]
     t0 = time.perf_counter()
