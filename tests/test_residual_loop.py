@@ -283,6 +283,13 @@ def test_a_candidate_that_diverges_in_verification_counts_as_worse():
     assert not np.isfinite(diverging.j_rms)
     assert _verification_change(stable, diverging)["verdict"] == "worse"
     assert _verification_change(stable, stable)["verdict"] == "unchanged"
+    # slower divergence: e^(2t) .. e^(5t) over the 60 s record. The prediction stays finite, but
+    # the block means grow with it (their scatter as large as their mean) or overflow when
+    # squared; the J_rms guideline the stable model meets is failed by far: worse, not unchanged
+    for growth in (2.0, 3.0, 4.0, 5.0):
+        slow = verify(one, growth * one, one, one, 0 * one, [0.0], t, u, y, output_names=["y"])
+        assert np.isfinite(slow.j_rms) and slow.j_rms > slow.guidelines["j_rms_max"] >= stable.j_rms
+        assert _verification_change(stable, slow)["verdict"] == "worse", growth
 
 
 # --- acceptance as CIFER practice does it ------------------------------------------------------

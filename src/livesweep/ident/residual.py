@@ -879,11 +879,18 @@ def _verification_change(before, after, alpha: float = FALSE_ALARM):
         means.extend(d[:n_b * n_block].reshape(n_b, n_block).mean(axis=1).tolist())
         ds.append(d)
     d = np.concatenate(ds) if ds else np.zeros(0)
-    noise = float(np.std(means, ddof=1) / math.sqrt(len(means))) if len(means) >= 3 else float("inf")
-    mean = float(d.mean()) if d.size else 0.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        noise = float(np.std(means, ddof=1) / math.sqrt(len(means))) if len(means) >= 3 else float("inf")
+        mean = float(d.mean()) if d.size else 0.0
     sb, sa = _ver_summary(before), _ver_summary(after)
-    if sa["j_rms"] is None or not np.isfinite(mean):
-        # the new model diverges open loop (or predicts nothing): worse, whatever the noise
+    limit = min(v.guidelines["j_rms_max"] for v in _as_list(after))
+    diverges = (sa["j_rms"] is None or not np.isfinite(mean) or (len(means) >= 3 and not np.isfinite(noise))
+                or (sb["j_rms"] is not None and sb["j_rms"] <= limit < sa["j_rms"]))
+    if diverges:
+        # the new model diverges open loop (or predicts nothing), or fails the method's J_rms
+        # guideline the model before met: worse, whatever the noise (a model growing as e^(2t)
+        # over the record has block means that grow with it, so their scatter is as large as
+        # their mean and a paired test alone would call it unchanged)
         return {"j_rms_before": sb["j_rms"], "j_rms_after": sa["j_rms"], "mean_change": None, "noise": None,
                 "verdict": "worse" if sb["j_rms"] is not None else "unchanged"}
     z = NormalDist().inv_cdf(1.0 - alpha)
