@@ -72,7 +72,8 @@ def test_identified_model_passes_verification_on_the_calm_air_doublets(full_repo
 def test_hover_state_space_stage_fixes_the_unmeasurable_and_removes_the_true_zeros():
     """Hover stage as `livesweep identify` runs it (shipped logs, pilot loop, responses through the
     logged sweep injections): Ldr and Ydr (no coherent pair) are fixed a priori, the reduction
-    removes Yr and Lr, and the four zeros are exactly the zeros of Tables 2.3-2.4; the derivatives
+    removes Yr and Lr, so every zero of Tables 2.3-2.4 is fixed, and beside them at most the two
+    small yaw derivatives at the guideline's edge (Nv, Np: test_state_space); the derivatives
     kept lie within 3 CR bounds of the tables."""
     from livesweep.config import load_case
     from livesweep.pipeline.frequency_response import run_frequency_response_stage
@@ -85,7 +86,9 @@ def test_hover_state_space_stage_fixes_the_unmeasurable_and_removes_the_true_zer
     assert any(n.startswith("Ydr fixed at 0 a priori") for n in ss.notes)
     truth = xv15_hover().derivatives
     fixed = {p.name for p in ss.fit.parameters if p.fixed}
-    assert fixed == {name for name, v in truth.items() if v == 0.0} == {"Yr", "Lr", "Ydr", "Ldr"}
+    zeros = {name for name, v in truth.items() if v == 0.0}
+    assert zeros == {"Yr", "Lr", "Ydr", "Ldr"}
+    assert zeros <= fixed <= zeros | {"Nv", "Np"}
     for p in ss.fit.parameters:
         if not p.fixed:
             assert abs(p.value - truth[p.name]) <= 3 * p.cramer_rao, p.name
