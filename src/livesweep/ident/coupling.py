@@ -23,7 +23,7 @@ from livesweep.effects.table import add_entry, normalised, restart_from
 from livesweep.errors import ConfigError
 from livesweep.ident.accuracy import MAX_COST_AVERAGE, guideline_failures, parameter_report
 from livesweep.ident.residual_space import model_misfit
-from livesweep.ident.state_space import StateSpaceFit, StateSpaceModel, fit_state_space, select_pairs
+from livesweep.ident.state_space import StateSpaceFit, StateSpaceModel, refit_state_space, select_pairs
 
 __all__ = ["Coupling", "no_path_pairs", "find_coupling", "START_GRID", "RIVAL_COST_RATIO"]
 
@@ -137,7 +137,7 @@ def find_coupling(table: dict, origin: dict, fit: StateSpaceFit, frs, skipped, *
         if progress:
             progress(f"residual loop: a path for {', '.join(f'{o}/{i}' for o, i in targets)} through {where}")
         try:
-            new_fit = fit_state_space(m.with_values(th), pairs, max_nfev=100)
+            new_fit = refit_state_space(m.with_values(th), pairs)
         except (ConfigError, np.linalg.LinAlgError, ValueError) as exc:
             tried.append({"where": where, "cost_after": None, "reason": f"could not identify: {exc}"})
             continue

@@ -52,12 +52,13 @@ from livesweep.ident.residual_space import (PairResidual, ResidualSpace, band_of
                                             whitened_ss)
 from livesweep.ident.selection import (FALSE_ALARM, NOISE_INFLATION, effective_points, indistinguishable, prefers,
                                        significance)
-from livesweep.ident.state_space import StateSpaceFit, StateSpaceModel, fit_state_space
+from livesweep.ident.state_space import StateSpaceFit, StateSpaceModel, fit_state_space, refit_state_space
 from livesweep.numbers import finite_or_none
 
 __all__ = ["KINDS", "FALSE_ALARM", "MIN_RELATIVE_COST_DROP", "FIXABLE_PREFIXES", "FREQUENCY_PREFIXES",
            "CLEAR_EVIDENCE_FACTOR", "ONLY_PARAMETER_CR_PCT", "PARTIAL", "PairResidual", "Candidate", "LoopStep",
-           "ResidualLoop", "pair_residuals", "diagnose", "augment_table", "run_residual_loop", "table_with_fit", "effect_text"]
+           "ResidualLoop", "pair_residuals", "diagnose", "augment_table", "run_residual_loop", "table_with_fit", "effect_text",
+           "model_effects"]
 
 #: The kinds the loop looks for (the catalogue's searched kinds).
 KINDS = SEARCHED_KINDS
@@ -204,15 +205,8 @@ class ResidualLoop:
         """Every effect in the final model, in the order added (the partners of a pair added
         together as their own entries; one taken out at a later step, marked ``removed`` in its
         step, is not listed)."""
-        out = []
-        for s in self.steps:
-            if s.effect is None:
-                continue
-            if "removed" not in s.effect:
-                out.append({k: v for k, v in s.effect.items() if k not in ("with", "replaces")})
-                out += list(s.effect.get("with", ()))
-            out += [e for e in _replacement(s.effect) if "removed" not in e]
-        return tuple(out)
+        return tuple({k: v for k, v in e.items() if k not in ("with", "replaces")}
+                     for e in model_effects(s.effect for s in self.steps))
 
     def to_dict(self) -> dict:
         return {"steps": [s.to_dict() for s in self.steps], "unexplained": list(self.unexplained),
@@ -403,8 +397,7 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
                 # second-order actuator on the same input)
                 if not rec_.get("with"):
                     for c in ranked:
-                        if (c.where, c.kind) != (rec_["where"], rec_["kind"]) and c.where == rec_["where"] \
-                                and c.n_parameters < len(rec_["parameters"]):
+                        if c.where == rec_["where"] and c.kind != rec_["kind"] and c.n_parameters < len(rec_["parameters"]):
                             single(c)
             leader = max(tried, key=lambda t: t.get("evidence_after", -np.inf), default=None)
             duo = []
@@ -495,8 +488,7 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
     for r in before:                                  # the final fit's residual
         if r.rms_noise_units > 2.0:
             unexplained.append({"pair": f"{r.output}/{r.input}", "rms_noise_units": round(r.rms_noise_units, 2)})
-    added = [e for s in steps if s.effect is not None
-             for e in (s.effect, *s.effect.get("with", ()), *_replacement(s.effect)) if "removed" not in e]
+    added = model_effects(s.effect for s in steps)
     removed = [s.effect for s in steps if s.effect is not None and "removed" in s.effect]
     found = {(e["kind"], e["where"]) for e in added}
     for e in added:              # a rival added at a later step was not an alternative but a second effect
@@ -739,7 +731,7 @@ def _backward(history, table, fit, ss_with, judge, progress):
             progress(f"residual loop: is {h['effect']['kind']} at {h['effect']['where']} still needed?")
         try:
             t, befores, _ = _rebuild(history, i, table)
-            f = _refit(StateSpaceModel.from_table(t), judge.pairs)
+            f = refit_state_space(StateSpaceModel.from_table(t), judge.pairs)
         except (ConfigError, np.linalg.LinAlgError, ValueError, KeyError) as exc:
             untested.append({"kind": h["effect"]["kind"], "where": h["effect"]["where"],
                              "error": f"{type(exc).__name__}: {exc}"})
@@ -755,9 +747,15 @@ def _backward(history, table, fit, ss_with, judge, progress):
     return (None if out is None else out[1:]), untested
 
 
-def _replacement(effect) -> tuple:
-    """The simpler effect a step put in an earlier one's place (:func:`_rechoose`), if any."""
-    return (effect["replaces"]["by"],) if effect.get("replaces") else ()
+def model_effects(effects) -> list[dict]:
+    """The effects in the final model from the steps' ``effect`` records (None for a step that
+    added nothing), in the order added: each step's effect, the partners of a pair as their own
+    entries, and the simpler effect a step put in an earlier one's place (:func:`_rechoose`);
+    none that a later step took out or replaced (``removed``). Works on the records of a
+    :class:`ResidualLoop` and on those read back from report.json."""
+    return [e for eff in effects if eff is not None
+            for e in (eff, *eff.get("with", ()), *((eff["replaces"]["by"],) if eff.get("replaces") else ()))
+            if "removed" not in e]
 
 
 def _rebuild(history, i, table, replacement=None):
@@ -813,7 +811,7 @@ def _rechoose(history, table, fit, ss_with, judge, progress):
                 progress(f"residual loop: would {alt.kind} at {alt.where} do for {h['effect']['kind']} now?")
             try:
                 t, befores, names = _rebuild(history, i, table, alt)
-                f = _refit(StateSpaceModel.from_table(t), judge.pairs)
+                f = refit_state_space(StateSpaceModel.from_table(t), judge.pairs)
             except (ConfigError, np.linalg.LinAlgError, ValueError, KeyError):
                 continue                          # not a replacement; the effect stays as chosen
             params = parameter_report(f, names)
@@ -917,24 +915,6 @@ ONLY_PARAMETER_CR_PCT = 100.0 / 3.0
 FREQUENCY_PREFIXES = ("w_", "wn_")
 
 
-#: Cost evaluations of a refit inside the loop before it is continued once (:func:`_refit`).
-REFIT_NFEV = 100
-
-
-def _refit(model, pairs):
-    """A refit inside the loop: :func:`~livesweep.ident.state_space.fit_state_space` with
-    :data:`REFIT_NFEV` cost evaluations; one that budget stopped is continued once from where it
-    stopped with twice as many. A slow but steady descent (a delay on a pilot-loop axis, its
-    cost equal to 1e-8 after 100 evaluations) is not a failure to converge; a fit still not
-    settled after that is reported as one."""
-    fit = fit_state_space(model, pairs, max_nfev=REFIT_NFEV)
-    if not fit.converged:
-        more = fit_state_space(fit.model.with_values(fit.theta), pairs, max_nfev=2 * REFIT_NFEV)
-        if more.converged or more.cost_average <= fit.cost_average:
-            fit = more
-    return fit
-
-
 def _worst(params):
     """The free parameter to fix at its fitted value, or None.
 
@@ -987,11 +967,11 @@ def _try(table, cand, fit, judge, ss_before, ver_before):
             new += names
             own.append(names)
         model = StateSpaceModel.from_table(aug)
-        new_fit = _refit(model, pairs)
+        new_fit = refit_state_space(model, pairs)
         if not new_fit.converged and judge.origin is not None:
             # the model's derivatives had bent to make up for the missing effect and the refit from
             # them is stuck: start them again where the case starts them (a second start)
-            again = _refit(StateSpaceModel.from_table(restart_from(aug, judge.origin)), pairs)
+            again = refit_state_space(StateSpaceModel.from_table(restart_from(aug, judge.origin)), pairs)
             if again.converged or again.cost_average < new_fit.cost_average:
                 new_fit = again
     except (ConfigError, np.linalg.LinAlgError, ValueError) as exc:
@@ -1029,7 +1009,7 @@ def _try(table, cand, fit, judge, ss_before, ver_before):
             break
         # the shape is there; one parameter is poorly determined: fix it where it is, refit the rest
         try:
-            refit = _refit(new_fit.model.with_values(new_fit.theta, fixed={worst["name"]: worst["value"]}), pairs)
+            refit = refit_state_space(new_fit.model.with_values(new_fit.theta, fixed={worst["name"]: worst["value"]}), pairs)
         except (ConfigError, np.linalg.LinAlgError, ValueError):
             break
         why = (f"CR% {worst['cramer_rao_pct']}, I% {worst['insensitivity_pct']}: poorly determined, "

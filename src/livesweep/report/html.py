@@ -281,7 +281,7 @@ def _residual(report: dict) -> str:
     rl = report.get("residual_loop")
     if not rl:
         return ""
-    from livesweep.ident.residual import effect_text
+    from livesweep.ident.residual import effect_text, model_effects
 
     blocks = [f"<p><b>{e(rl['conclusion'])}</b> ({rl['re_identifications']} re-identifications)"
               + (f"; augmented case: <code>{e(rl['augmented_case'])}</code>" if rl.get("augmented_case") else "")
@@ -305,11 +305,7 @@ def _residual(report: dict) -> str:
                       f"{st['cost_after']:.2f}{ver}. {why}</p>"
                       + (f"<ul>{tried}</ul>" if tried else "") + _img(st.get("plot"), 1100, f"residual step {k + 1}"))
     if rl.get("parameter_units") and rl.get("augmented_case"):
-        kept = [e_ for st in rl["steps"] if st["effect"]
-                for e_ in (st["effect"], *((st["effect"]["replaces"]["by"],) if st["effect"].get("replaces") else ()))
-                if "removed" not in e_]
-        final = {p["name"]: p for e_ in kept
-                 for p in [*e_["parameters"], *(q for w in e_.get("with", ()) for q in w["parameters"])]}
+        final = {p["name"]: p for e_ in model_effects(st["effect"] for st in rl["steps"]) for p in e_["parameters"]}
         if final:
             blocks.append("<h3>Parameters of the added effects</h3>" + _parameter_table(
                 [{"name": n, "value": p["value"], "fixed": bool(p.get("fixed")), "cramer_rao_pct": p.get("cramer_rao_pct"),
