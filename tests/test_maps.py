@@ -96,16 +96,21 @@ def test_every_preset_loads_with_its_header_units_one_clock_and_test_points():
         # load_channel_map keeps working on a preset file
         signals, spectral = load_channel_map(m.path)
         assert signals == m.signals and spectral == m.spectral
-    arducopter = {1: "roll", 2: "pitch", 3: "yaw", 4: "roll", 5: "pitch", 6: "yaw", 7: "roll", 8: "pitch", 9: "yaw",
-                  10: "roll", 11: "pitch", 12: "yaw"}
+    # the rate-loop maps see the input, recovery and rate axes (the chirp enters the rate demand);
+    # the motor-mix maps see the mixer axes too (it enters the mixer)
+    rate_loop = {1: "roll", 2: "pitch", 3: "yaw", 4: "roll", 5: "pitch", 6: "yaw", 7: "roll", 8: "pitch", 9: "yaw"}
+    mixer = {**rate_loop, 10: "roll", 11: "pitch", 12: "yaw"}
     for name in PRESETS:
         tp = load_map(name).test_points
         if name.startswith("ardupilot-copter") or name == "ardupilot-sysid-dataflash":
-            assert tp.axes == arducopter and tp.sources == ("autopilot", "marker", "sweep")
+            want = rate_loop if name in ("ardupilot-copter-pid", "ardupilot-sysid-dataflash") else mixer
+            assert tp.axes == want and tp.sources == ("autopilot", "marker", "sweep")
         else:
             assert tp.axes == {} and tp.sources == ("marker", "sweep")
     pid = load_map("ardupilot-copter-pid")
-    assert all(s.stamp is None for s in pid.signals.values())           # PID_TUNING has no time field
+    # PID_TUNING has no time field: it borrows the boot clock of the ATTITUDE sent in the same tick
+    assert all(s.stamp_topic == "/mavlink/ATTITUDE" and s.stamp == "time_boot_ms"
+               for s in pid.signals.values() if s.topic == "/mavlink/PID_TUNING")
     assert [dict(pid.signals[n].where) for n in ("roll", "pitch", "yaw", "p", "q", "r")] == \
         [{"axis": 1}, {"axis": 2}, {"axis": 3}, {"axis": 1}, {"axis": 2}, {"axis": 3}]
 

@@ -111,7 +111,7 @@ def sid7():
     from pymavlink import DFReader
 
     r = DFReader.DFReader_binary(str(SID7), zero_time_base=True)
-    keep = {"ATT", "RATE", "RCOU", "PIDR", "PIDP", "PIDY", "IMU", "MSG", "MODE"}
+    keep = {"ATT", "RATE", "RCOU", "PIDR", "PIDP", "PIDY", "IMU", "MSG", "MODE", "PARM"}
     recs: dict[str, list[dict]] = {k: [] for k in keep}
     first = None
     while True:
@@ -338,7 +338,9 @@ def test_dataflash_full_rate_pid_tuning_and_imu_equal_the_log(sid7):
     expected = {"HEARTBEAT": 3, "ATTITUDE": len(_window(sid7["ATT"], lo, hi)),
                 "PID_TUNING": sum(len(_window(sid7[k], lo, hi)) for k in ("PIDR", "PIDP", "PIDY")),
                 "SERVO_OUTPUT_RAW": len(_window(sid7["RCOU"], lo, hi)),
-                "RAW_IMU": sum(r["I"] == 0 for r in imu), "SCALED_IMU2": sum(r["I"] == 1 for r in imu)}
+                "RAW_IMU": sum(r["I"] == 0 for r in imu), "SCALED_IMU2": sum(r["I"] == 1 for r in imu),
+                # a ground station's parameter fetch at the slice start: every parameter logged before it
+                "PARAM_VALUE": len({r["Name"] for r in sid7["PARM"] if r["TimeUS"] < lo})}
     assert expected["ATTITUDE"] > 790
     assert _sent_table(out) == counts["received"] == expected
     assert counts["seq_gaps"] == {}
@@ -419,3 +421,25 @@ def test_rate_cap_on_a_tlog_and_an_empty_slice_are_one_line(capsys):
     line = _one_error_line(capsys, ["stream", str(SID7), "--mavlink", "udpout:127.0.0.1:14550",
                                     "--start-s", "10000"])
     assert str(SID7) in line and "nothing to send from 10000 s" in line
+
+
+def test_dataflash_parameters_go_out_as_a_fetch_then_as_each_change(sid7):
+    """PARAM_VALUE: at the slice start every parameter with its value then (what a ground station
+    fetches as it connects), then each one set during the slice when the log records it (the
+    vehicle's echo): here SID_AXIS = 7 set 8.9 s before SystemID axis 7 starts."""
+    frames, counts, out = _stream_into_source(str(SID7), "--speed", "0", "--start-s", "20", "--end-s", "30")
+    lo, hi = sid7["first_us"] + 20_000_000, sid7["first_us"] + 30_000_000
+    before: dict = {}
+    for r in sid7["PARM"]:
+        if r["TimeUS"] < lo:
+            before[r["Name"]] = r["Value"]
+    changes = [r for r in sid7["PARM"] if lo <= r["TimeUS"] <= hi]
+    got = _by_topic(frames, "PARAM_VALUE")
+    dump, echo = got[:len(before)], got[len(before):]
+    assert {p["param_id"]: p["param_value"] for p in dump} == pytest.approx(before, rel=1e-7)
+    assert all(p["param_count"] == len(before) for p in dump)
+    assert sorted(p["param_index"] for p in dump) == list(range(len(before)))
+    assert [(p["param_id"], p["param_value"]) for p in echo] == [(r["Name"], r["Value"]) for r in changes]
+    assert ("SID_AXIS", 7.0) in [(p["param_id"], p["param_value"]) for p in echo]
+    # the chirp the monitor learns from them: ArduCopter's SID_F_START_HZ 0.5, SID_F_STOP_HZ 12, SID_T_REC 40
+    assert (before["SID_F_START_HZ"], before["SID_F_STOP_HZ"], before["SID_T_REC"]) == (0.5, 12.0, 40.0)

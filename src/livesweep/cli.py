@@ -333,7 +333,7 @@ def _monitor_settings(args):
         required_pairs=_required_pairs(args.require, spectral),
         saturation_limits=_saturation_limits(args.saturation, spectral),
         references=tuple(spectral.references) if spectral.references else None,
-        test_points=chosen.test_points,
+        test_points=chosen.test_points, map_name=chosen.name, vehicle=dict(chosen.vehicle) or None,
     )
 
 

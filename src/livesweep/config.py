@@ -64,10 +64,13 @@ CASE_KEYS = ("case", "identify", "verify", "signals", "spectral") + RAW_TABLE_KE
 
 _CASE_TABLE_KEYS = ("name", "aircraft", "condition")
 _RECORD_KEYS = ("log", "label", "start_s", "end_s")
-_SIGNAL_KEYS = ("topic", "field", "stamp", "stamp_scale", "scale", "offset", "units", "sysid", "compid", "where")
+_SIGNAL_KEYS = ("topic", "field", "stamp", "stamp_topic", "stamp_scale", "scale", "offset", "units", "sysid", "compid",
+                "where")
 #: Top-level tables of a channel map (a case file's keys are accepted too: ``--case`` takes one).
 MAP_KEYS = ("map", "signals", "spectral", "test_points")
-_MAP_TABLE_KEYS = ("name", "description", "needs")
+_MAP_TABLE_KEYS = ("name", "description", "needs", "vehicle")
+#: ``[map.vehicle]`` keys are parameter names (``FRAME_CLASS``) or ``MAV_TYPE`` (the HEARTBEAT type).
+_VEHICLE_KEY = re.compile(r"[A-Z][A-Z0-9_]{0,15}")
 _TEST_POINT_KEYS = ("sources", "axes", "required", "min_duration_s")
 #: Where test points may come from (:mod:`livesweep.monitor.testpoints`).
 TEST_POINT_SOURCES = ("autopilot", "marker", "sweep")
@@ -102,6 +105,11 @@ class SignalSpec:
     stamp : str or None
         Field holding the vehicle time of the sample; None to use the MCAP ``log_time``
         (receive time, ns).
+    stamp_topic : str or None
+        The topic whose ``stamp`` field times this signal, when its own messages carry no time
+        (MAVLink PID_TUNING): each message takes the stamp of the latest message of that topic
+        received before it (ArduCopter sends both in one telemetry tick), so the signal is on the
+        vehicle clock at any replay speed. None: ``stamp`` is a field of the signal's own topic.
     stamp_scale : float
         Seconds per stamp unit (``1e-6`` for ``time_usec``). 1.0 when ``stamp`` is None.
     scale, offset : float
@@ -128,6 +136,7 @@ class SignalSpec:
     sysid: int | None = None
     compid: int | None = None
     where: tuple = ()
+    stamp_topic: str | None = None
 
     def __post_init__(self) -> None:
         w = self.where
@@ -239,6 +248,10 @@ class ChannelMap:
         ``[spectral]``; None when absent.
     test_points : TestPointSettings or None
         ``[test_points]`` with its defaults filled in; None when the table is absent.
+    vehicle : dict of str -> tuple of float
+        ``[map.vehicle]``: the vehicle this map is made for, as parameter values
+        (``FRAME_CLASS``, ``FRAME_TYPE``) and ``MAV_TYPE`` (its HEARTBEAT type), each one or more
+        allowed values; the monitor and ``inspect`` check them against what the vehicle says.
     """
 
     name: str
@@ -248,6 +261,7 @@ class ChannelMap:
     signals: dict[str, SignalSpec]
     spectral: SpectralSettings | None
     test_points: TestPointSettings | None
+    vehicle: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -385,6 +399,10 @@ def _parse_signal(ctx: _Ctx, name: str, raw: Any) -> SignalSpec:
         if req not in t:
             raise ctx.error(where, f"missing required key {req!r} (a signal needs topic and field)")
     stamp = _string(ctx, t["stamp"], f"{where}.stamp") if "stamp" in t else None
+    stamp_topic = _string(ctx, t["stamp_topic"], f"{where}.stamp_topic") if "stamp_topic" in t else None
+    if stamp_topic is not None and stamp is None:
+        raise ctx.error(f"{where}.stamp_topic", "is given without 'stamp' (the field of that topic that holds the time)",
+                        stamp_topic)
     if "stamp_scale" in t and stamp is None:
         raise ctx.error(f"{where}.stamp_scale", "is given without 'stamp' (log_time is already in ns -> s)",
                         t["stamp_scale"])
@@ -402,9 +420,11 @@ def _parse_signal(ctx: _Ctx, name: str, raw: Any) -> SignalSpec:
     ids = {k: _vehicle_id(ctx, t[k], f"{where}.{k}") for k in ("sysid", "compid") if k in t}
     if topic.startswith("/mavlink/"):
         named = [(f"{where}.field", f) for f in expression.operands]
-        named += [(f"{where}.stamp", stamp)] if stamp is not None else []
+        named += [(f"{where}.stamp", stamp)] if stamp is not None and stamp_topic is None else []
         named += [(f"{where}.where.{k}", k) for k, _ in selection]
         _check_mavlink_fields(ctx, where, topic, named)
+    if stamp_topic is not None and stamp_topic.startswith("/mavlink/"):
+        _check_mavlink_fields(ctx, where, stamp_topic, [(f"{where}.stamp", stamp)], topic_key="stamp_topic")
     return SignalSpec(
         name=name,
         topic=topic,
@@ -417,6 +437,7 @@ def _parse_signal(ctx: _Ctx, name: str, raw: Any) -> SignalSpec:
         sysid=ids.get("sysid"),
         compid=ids.get("compid"),
         where=selection,
+        stamp_topic=stamp_topic,
     )
 
 
@@ -444,7 +465,8 @@ def _parse_where(ctx: _Ctx, raw: Any, key: str) -> tuple[tuple[str, int | float]
     return tuple(out)
 
 
-def _check_mavlink_fields(ctx: _Ctx, where: str, topic: str, named: list[tuple[str, str]]) -> None:
+def _check_mavlink_fields(ctx: _Ctx, where: str, topic: str, named: list[tuple[str, str]], *,
+                          topic_key: str = "topic") -> None:
     """Every field a signal on ``/mavlink/<MSG>`` names must be a field of that MAVLink message
     (``sysid``, ``compid`` or a field of the dialect's definition; an array element as
     ``name.index`` with the index in range)."""
@@ -454,7 +476,7 @@ def _check_mavlink_fields(ctx: _Ctx, where: str, topic: str, named: list[tuple[s
     try:
         cls = message_class(msg)
     except ConfigError as e:
-        raise ctx.error(f"{where}.topic", f"{e} (a /mavlink/ topic is /mavlink/<MESSAGE NAME>)", topic) from None
+        raise ctx.error(f"{where}.{topic_key}", f"{e} (a /mavlink/ topic is /mavlink/<MESSAGE NAME>)", topic) from None
     lengths = {"sysid": 0, "compid": 0}
     for i, n in enumerate(cls.fieldnames):
         lengths[n] = 0 if cls.fieldtypes[i] == "char" else int(cls.array_lengths[cls.orders[i]])
@@ -598,11 +620,22 @@ def _parse_test_points(ctx: _Ctx, raw: Any, spectral: SpectralSettings | None) -
     return TestPointSettings(sources=sources, axes=axes, required=required, min_duration_s=min_s)
 
 
-def _parse_map_table(ctx: _Ctx, raw: Any) -> dict[str, str]:
-    """``[map]``: name, description, needs (strings)."""
+def _parse_map_table(ctx: _Ctx, raw: Any) -> dict[str, Any]:
+    """``[map]``: name, description, needs (strings) and ``vehicle`` (parameter -> value or values)."""
     t = _table(ctx, raw, "map")
     _check_keys(ctx, t, _MAP_TABLE_KEYS, "map")
-    out = {k: _string(ctx, t[k], f"map.{k}", nonempty=(k == "name")) for k in _MAP_TABLE_KEYS if k in t}
+    out: dict[str, Any] = {k: _string(ctx, t[k], f"map.{k}", nonempty=(k == "name"))
+                           for k in _MAP_TABLE_KEYS if k in t and k != "vehicle"}
+    vehicle = {}
+    for k, v in _table(ctx, t.get("vehicle", {}), "map.vehicle").items():
+        key = f"map.vehicle.{quote(k)}"
+        if not _VEHICLE_KEY.fullmatch(k):
+            raise ctx.error(key, "a key is a vehicle parameter name (FRAME_CLASS) or MAV_TYPE", k)
+        values = v if isinstance(v, list) else [v]
+        if not values:
+            raise ctx.error(key, "must be a number or a non-empty array of numbers", v)
+        vehicle[k] = tuple(_number(ctx, x, key) for x in values)
+    out["vehicle"] = vehicle
     if "name" in out and (len(out["name"]) > limits.MAX_NAME_CHARS or not _SIGNAL_NAME.fullmatch(out["name"])):
         raise ctx.error("map.name", "a map name holds letters, digits, '_', and '.' or '-' between them "
                         f"(at most {limits.MAX_NAME_CHARS} characters)", out["name"])
@@ -795,4 +828,4 @@ def read_channel_map(path: str | os.PathLike[str], *, one_clock: bool = True) ->
     test_points = _parse_test_points(ctx, data["test_points"], spectral) if "test_points" in data else None
     return ChannelMap(name=head.get("name", ctx.path.stem), description=head.get("description", ""),
                       needs=head.get("needs", ""), path=ctx.path, signals=signals, spectral=spectral,
-                      test_points=test_points)
+                      test_points=test_points, vehicle=head.get("vehicle", {}))

@@ -23,7 +23,8 @@ from pathlib import Path
 from livesweep.config import ChannelMap, TestPointSettings, read_channel_map
 from livesweep.errors import ConfigError
 
-__all__ = ["MapInfo", "ChannelMap", "TestPointSettings", "PRESET_DIR", "preset_names", "list_maps", "load_map"]
+__all__ = ["MapInfo", "ChannelMap", "TestPointSettings", "PRESET_DIR", "preset_names", "list_maps", "load_map",
+           "presets_for", "vehicle_fits"]
 
 #: Where the presets live (package data).
 PRESET_DIR = Path(__file__).resolve().parent / "data" / "maps"
@@ -104,3 +105,25 @@ def load_map(name_or_path: str | os.PathLike[str]) -> ChannelMap:
     if m.name != name:
         raise ConfigError(f"{m.path}: map.name: a preset's name must be its file name {name!r}, got {m.name!r}")
     return m
+
+
+def vehicle_fits(vehicle: dict, have: dict) -> bool:
+    """Whether a map's ``[map.vehicle]`` (name -> allowed values) agrees with what a vehicle is known
+    to have (name -> value); a name the vehicle has not said is no contradiction."""
+    return all(k not in have or any(abs(float(have[k]) - float(a)) < 1e-6 for a in allowed)
+               for k, allowed in vehicle.items())
+
+
+def presets_for(frame_class: int | None, frame_type: int | None, mav_type: int | None = None) -> list[str]:
+    """The presets made for a vehicle's frame (``FRAME_CLASS``, ``FRAME_TYPE``) and HEARTBEAT type:
+    those whose ``[map.vehicle]`` names the frame and agrees with it, sorted by name."""
+    have = {k: v for k, v in (("FRAME_CLASS", frame_class), ("FRAME_TYPE", frame_type), ("MAV_TYPE", mav_type))
+            if v is not None}
+    if "FRAME_CLASS" not in have:
+        return []
+    out = []
+    for name in preset_names():
+        m = load_map(name)
+        if "FRAME_CLASS" in m.vehicle and vehicle_fits(m.vehicle, have):
+            out.append(name)
+    return out

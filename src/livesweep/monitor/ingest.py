@@ -123,6 +123,8 @@ class Ingest(threading.Thread):
         self._verdicts: dict[str, bool] = {}     # topic -> wanted (decided once per topic)
         self.drain_timeout_s = float(drain_timeout_s)
         self.received = 0          # frames read from the sources (all recorded, when recording)
+        #: receive time [ns] of the latest frame from each system (``sysid``; None: frames without one)
+        self.last_rx: dict = {}
         self._topics: set[str] = set()  # topics read so far (the first frame of each goes to the analysis)
         self.drained = 0           # of which read while draining at stop
         self.error: BaseException | None = None
@@ -149,6 +151,10 @@ class Ingest(threading.Thread):
         if self.recorder is not None:
             self.recorder.record(frames)
         self.received += len(frames)
+        last = self.last_rx
+        for f in frames:
+            d = f.data
+            last[d.get("sysid") if isinstance(d, dict) else None] = f.receive_ns
         seen = self._topics
         first = None
         for f in frames:

@@ -36,7 +36,7 @@ import numpy as np
 
 from livesweep.errors import ConfigError
 from livesweep.monitor.ingest import FrameQueue, Ingest
-from livesweep.monitor.testpoints import CLOSE_WAIT_S, GRID_TOL, SOURCES, TestPointTracker
+from livesweep.monitor.testpoints import CLOSE_WAIT_S, GRID_TOL, LOST_AFTER_S, LOST_TOPIC, SOURCES, TestPointTracker
 from livesweep.monitor.text import time_text
 from livesweep.spectral import DEFAULT_WINDOW_S
 from livesweep.spectral.excitation import Alert, ExcitationMonitor
@@ -56,6 +56,7 @@ TIMESERIES_EVERY_S = 0.2      # time series go to the view in batches this often
 QUEUE_LIMIT_FRAMES = 50_000   # frames waiting for the analysis at most (about 50 MB)
 SWITCH_INTERVAL_S = 0.001     # the GIL changes hands at least this often while the monitor runs
 DIAGNOSE_AFTER_S = 5.0        # a map's signals that found nothing are named this long after the first frame [s of receive time]
+PACE_SPAN_S = 30.0            # the data's pace (data s per receive s) is measured over this much data [s]
 
 #: Counters whose growth is a ``link`` alert: (where, key, words).
 LINK_ANOMALIES = (
@@ -113,6 +114,11 @@ class MonitorSettings:
         Where test points come from, which input each SystemID axis sweeps and which pairs each
         swept input must cover (a map's ``[test_points]`` table); None: every source, the
         on-axis output of the swept input, 10 s at least.
+    map_name : str, optional
+        The channel map's name (what a ``map`` alert calls it).
+    vehicle : dict of str -> tuple of float, optional
+        The vehicle the map is made for (its ``[map.vehicle]``: ``FRAME_CLASS``, ``FRAME_TYPE``,
+        ``MAV_TYPE``); checked against what the vehicle says of itself.
     """
 
     signals: dict
@@ -129,6 +135,8 @@ class MonitorSettings:
     view_period_s: float = 1.0
     references: tuple | None = None
     test_points: object | None = None
+    map_name: str | None = None
+    vehicle: dict | None = None
 
     def to_dict(self) -> dict:
         """Everything a replay needs to run as the live monitor did (the recording's settings attachment)."""
@@ -145,6 +153,8 @@ class MonitorSettings:
             "test_points": None if tp is None else {
                 "sources": list(tp.sources), "axes": {str(k): v for k, v in tp.axes.items()},
                 "required": {k: list(v) for k, v in tp.required.items()}, "min_duration_s": tp.min_duration_s},
+            "map_name": self.map_name,
+            "vehicle": None if not self.vehicle else {k: list(v) for k, v in self.vehicle.items()},
         }
 
     @classmethod
@@ -166,6 +176,9 @@ class MonitorSettings:
                 saturation_limits=None if not d.get("saturation_limits") else
                 {k: tuple(v) for k, v in d["saturation_limits"].items()},
                 test_points=None if tp is None else _test_point_settings(tp),
+                map_name=d.get("map_name"),
+                vehicle=None if not d.get("vehicle") else {str(k): tuple(float(x) for x in v)
+                                                           for k, v in d["vehicle"].items()},
             )
         except (KeyError, TypeError, ValueError, AttributeError) as e:
             raise ConfigError(f"{where}: not monitor settings livesweep can use ({type(e).__name__}: {e})") from None
@@ -274,8 +287,10 @@ class MonitorPipeline:
                                             settings.sample_rate_hz, saturation_limits=settings.saturation_limits,
                                             required_pairs=settings.required_pairs)
         self.test_points = _tracker(settings, self.names)
+        self.test_points.source_rates = self._source_rates
         self.verdict, self.verdict_reasons = None, ()          # the operator's verdict (test points)
         self._rx_to_data: tuple[int, float] | None = None       # (receive ns, data s) at the aligner's frontier
+        self._rx_history: deque = deque()            # (receive ns, data s) of recent frontier moves (the data's pace)
         self.keep_estimates = keep_estimates
         if keep_estimates is True:
             self.estimates: list[Estimate] | deque = []
@@ -311,7 +326,9 @@ class MonitorPipeline:
         self._first_rx: int | None = None               # receive time of the first frame [ns]
         self._topics_seen: dict = {}                    # topic -> (frames taken, the first one's data)
         self._analysed: dict[str, bool] = {}            # topic -> the analysis uses it
-        self._wanted = {spec.topic for spec in self.aligner.specs.values()}   # the map's topics
+        self._wanted = {spec.topic for spec in self.aligner.specs.values()} | set(self.aligner.stamp_topics)
+        self._unfit: str | None = None                  # why the map does not fit the vehicle, once said
+        self._lost_said = False                         # the telemetry-lost event of this silence was made
 
     def request_stop(self) -> None:
         """Stop at the next turn of the loop (safe from a signal handler or another thread)."""
@@ -364,6 +381,8 @@ class MonitorPipeline:
                     last_process = now
                 if now - self._last_report >= REPORT_EVERY_S:
                     self._report(now)
+                if live:
+                    self._watch_link(ingest)
                 ingest.check()
                 if ended or self._stop.is_set():
                     break
@@ -414,22 +433,77 @@ class MonitorPipeline:
         self.aligner.push(f)
         if self.aligner.k_frontier != before:
             self._rx_to_data = (f.receive_ns, self.aligner.frontier_s)
+            hist = self._rx_history
+            hist.append(self._rx_to_data)
+            while len(hist) > 2 and hist[-1][1] - hist[1][1] > PACE_SPAN_S:
+                hist.popleft()
         if self.map_problems is None or self._map_missing:
             self._map_check(f.receive_ns)
         if self.test_points.wants(f.topic):
+            self.test_points.learn(f, self.aligner.system)
             t = self._data_time(f.receive_ns)
             if t is None:
                 return                       # no data yet: nothing a test point could hold
             for ev in self.test_points.events_of(f, t, self.aligner.system):
-                self._drain_blocks()         # the samples up to the event first (its pre-test baseline)
+                self._drain_blocks()         # the samples up to the event first (they may belong to it)
                 self._test_point_records(self.test_points.event(ev))
                 self._update_verdict(ev.t_s)
+                if ev.action == "lost":      # nothing more will come: judge what ended or was cut now
+                    self._test_point_records(self.test_points.expire(t, lost=True), log_time_ns=f.receive_ns)
+            if self.s.vehicle and self._unfit is None:
+                self._check_vehicle(f.receive_ns)
         if (self.test_points.closing and (t := self._data_time(f.receive_ns)) is not None
                 and t >= min(tp.end_s for tp in self.test_points.closing) + CLOSE_WAIT_S):
             # an ended test point no samples reach (no telemetry at all): judged on what it has
             self._drain_blocks()
             if records := self.test_points.expire(t):
                 self._test_point_records(records, log_time_ns=f.receive_ns)
+
+    def _watch_link(self, ingest: Ingest) -> None:
+        """A test point whose vehicle has sent nothing for :data:`LOST_AFTER_S` of receive time is
+        closed NO-GO, "telemetry lost": the event is recorded (``LOST_TOPIC``) and taken like any
+        frame, so a replay closes it where the live run did."""
+        tracker = self.test_points
+        if tracker.current is None and not tracker.closing:
+            return
+        sysid = self.aligner.system
+        last = ingest.last_rx.get(sysid) if sysid is not None else max(ingest.last_rx.values(), default=None)
+        if last is None:
+            return
+        now = receive_ns()
+        if now - last < LOST_AFTER_S * 1e9:
+            self._lost_said = False
+            return
+        if self._lost_said:
+            return
+        self._lost_said = True
+        from livesweep.telemetry.frames import Frame
+
+        frame = Frame(LOST_TOPIC, now, None, {"silent_s": round((now - last) * 1e-9, 3), "last_rx_ns": int(last),
+                                              "sysid": sysid})
+        if self.recorder is not None:
+            self.recorder.record([frame])
+        self._take(frame)
+
+    def _check_vehicle(self, receive_ns: int) -> None:
+        """Say once, as a ``map`` alert, that the vehicle is not the one the map is made for (its
+        parameters, "Frame:" text or HEARTBEAT type contradict ``[map.vehicle]``); every test point
+        from then on is NO-GO for it."""
+        why = self.test_points.vehicle.contradiction(self.s.vehicle)
+        if why is None:
+            return
+        from livesweep.maps import presets_for
+
+        self._unfit = self.test_points.unfit = why
+        c, t = self.test_points.vehicle.frame()
+        better = [n for n in presets_for(c, t, self.test_points.vehicle.mav_type) if n != self.s.map_name]
+        name = f"map {self.s.map_name}" if self.s.map_name else "the map"
+        self._map_alert(f"{name} does not fit: {why}" + (f"; use {' or '.join(better)}" if better else ""),
+                        receive_ns)
+
+    def _source_rates(self) -> dict:
+        """The rate each aligned signal arrives at [Hz] (from its first samples' spacing)."""
+        return {n: 1.0 / c.dt for n, c in self.aligner.ch.items() if c.dt}
 
     def _drain_blocks(self) -> None:
         """Every block the aligner has ready, now: what follows (a test-point event, a map alert)
@@ -440,11 +514,24 @@ class MonitorPipeline:
 
     def _data_time(self, receive_ns: int) -> float | None:
         """The data time [s] of a frame without a usable stamp (a STATUSTEXT, a marker): the aligner's
-        frontier when it last moved, plus the receive time since."""
+        frontier when it last moved, plus the receive time since at the data's own pace (data seconds
+        per receive second over the last ``PACE_SPAN_S``: 1 live, N for a log streamed at N x), so a
+        SystemID text during a stretch without samples keeps its place."""
         if self._rx_to_data is None:
             return None
         rx, t = self._rx_to_data
-        return t + (receive_ns - rx) * 1e-9
+        return t + (receive_ns - rx) * 1e-9 * self._pace()
+
+    def _pace(self) -> float:
+        """Data seconds per receive second: 1 unless the recent frontier moves say otherwise."""
+        hist = self._rx_history
+        if len(hist) < 2:
+            return 1.0
+        (rx0, t0), (rx1, t1) = hist[0], hist[-1]
+        if rx1 - rx0 < 1e9 or t1 - t0 < 1.0:
+            return 1.0
+        pace = (t1 - t0) / ((rx1 - rx0) * 1e-9)
+        return pace if 0.2 <= pace <= 200.0 else 1.0
 
     def _test_point_records(self, records, log_time_ns: int | None = None) -> None:
         """Show, publish and (when closed) record test points, each followed by the operator's verdict
@@ -465,16 +552,16 @@ class MonitorPipeline:
 
     def _operator_verdict(self, rec: dict | None = None) -> tuple[str, tuple, dict | None]:
         """(verdict, reasons, the test point it is about): from the test point record just made, else
-        from the tracker's state; never from the sliding window."""
+        from the tracker's state; never from the sliding window. A running test point is WAIT with
+        its running verdict ("GO so far, 0.5-2.9 Hz of 0.5-12 Hz swept"): GO and NO-GO are said once,
+        when it closes, and hold until the next one."""
         tracker = self.test_points
         if rec is None:
             if tracker.current is not None:
                 rec = tracker.current.record("open")
             elif tracker.closing:
-                # the final judgement is a data tick away: the running verdict holds until it comes
-                # (no GO -> WAIT -> GO flicker on the operator's screen and in the recording)
                 rec = tracker.closing[-1].record("open")
-                return self.verdict or "WAIT", (f"test point ended at {time_text(tracker.closing[-1].end_s)}: judging",), rec
+                return "WAIT", (f"test point ended at {time_text(tracker.closing[-1].end_s)}: judging",), rec
             elif tracker.closed:
                 rec = tracker.closed[-1]
             else:
@@ -483,11 +570,12 @@ class MonitorPipeline:
         who = f"{rec['swept_input'] or 'an input'} swept"
         if rec["state"] == "open":
             who += f" since {time_text(rec['start_s'])} ({rec['source']})"
-            if rec["verdict"] == "GO":
-                return "GO", (f"test point running, enough already: {who}", *rec["reasons"]), rec
-            return "WAIT", (f"test point running: {who}", *rec["missing"]), rec
+            if rec.get("running") is None:
+                return "WAIT", (f"test point running: {who}",), rec
+            return "WAIT", (f"test point running: {who}: {rec['running']}, {rec.get('progress', '')}".rstrip(", "),
+                            *rec["reasons"]), rec
         return rec["verdict"], (f"last test point ({who} {time_text(rec['start_s'])} - {time_text(rec['end_s'])}): "
-                                f"{rec['verdict']}", *rec["reasons"], *rec["missing"]), rec
+                                f"{rec['label']}", *rec["missing"], *rec["reasons"]), rec
 
     def _update_verdict(self, t_s: float, rec: dict | None = None) -> None:
         verdict, reasons, rec = self._operator_verdict(rec)

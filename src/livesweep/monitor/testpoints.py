@@ -7,6 +7,10 @@ authority (``sources`` in a map's ``[test_points]`` table selects them):
   axis=N" opens a test point sweeping the input the map's ``axes`` table names for axis N, and
   "SystemID Finished", or the HEARTBEAT's custom mode leaving SYSTEMID (25), closes it; in a
   DataFlash log the same texts come as MSG, the start as SIDS (``Ax``) and the mode as MODE.
+  The sweep the autopilot was told to fly comes with it (the SIDS record, or the ``SID_*``
+  parameters the vehicle sent as PARAM_VALUE / logged as PARM: :mod:`livesweep.monitor.vehicle`),
+  so the test point is judged over that band. An axis the map names no input for (a mixer axis
+  on a map that sees the rate loops) is a test point too, judged NO-GO with that reason.
   Only the vehicle the aligner analyses counts (a second system's texts are ignored).
 * **marker**: the operator says so: a line typed in the monitor's terminal (``s roll`` / ``e``,
   recorded as ``/marker/terminal``), a JSON message ``{"action": "start", "input": "roll"}`` on a
@@ -19,11 +23,12 @@ authority (``sources`` in a map's ``[test_points]`` table selects them):
   ignored. Used only until an autopilot or marker event is seen.
 
 While a test point is open its aligned samples are kept (up to ``MAX_TEST_POINT_S``) and judged
-every ``JUDGE_EVERY_S`` of data; when it closes it is judged once more
-(:func:`livesweep.spectral.test_point.judge_test_point`: the composite over the whole test point,
-the pairs of the swept input, real excitation against the quiet ``PRE_TEST_S`` before it, not
-counting the tail of an earlier test point). Everything
-depends on the frames and samples alone, so a replay reproduces the test points exactly.
+every ``JUDGE_EVERY_S`` of data over the band swept so far (a *running* verdict: "GO so far, 0.5-2.9
+Hz of 0.5-12 Hz swept"); when it closes it is judged once, over all of it and the whole band
+(:func:`livesweep.spectral.test_point.judge_test_point`). A closing verdict that differs from the
+last running one says why. The monitor closes a test point whose telemetry stopped
+(:data:`LOST_TOPIC`: no frame of the vehicle for ``LOST_AFTER_S``) NO-GO with "telemetry lost".
+Everything depends on the frames and samples alone, so a replay reproduces the test points exactly.
 """
 
 from __future__ import annotations
@@ -35,15 +40,22 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from livesweep.monitor.vehicle import VehicleInfo, axis_name
+from livesweep.spectral.injection import SweepInjection
 from livesweep.spectral.test_point import TestPointJudgement, judge_test_point
 from livesweep.telemetry.frames import Frame
 
-__all__ = ["TestPointEvent", "TestPoint", "TestPointTracker", "SOURCES", "MARKER_TOPIC",
-           "ARDUPILOT_SYSTEMID_MODE", "JUDGE_EVERY_S", "MAX_TEST_POINT_S", "PRE_TEST_S"]
+__all__ = ["TestPointEvent", "TestPoint", "TestPointTracker", "SOURCES", "MARKER_TOPIC", "LOST_TOPIC",
+           "ARDUPILOT_SYSTEMID_MODE", "JUDGE_EVERY_S", "MAX_TEST_POINT_S", "LOST_AFTER_S"]
 
 SOURCES = ("autopilot", "marker", "sweep")
 #: Topic of the operator's terminal markers (recorded, so a replay sees them).
 MARKER_TOPIC = "/marker/terminal"
+#: Topic of the monitor's own "telemetry lost" event (recorded, so a replay closes the test point
+#: where the live run did): ``{"silent_s": s, "last_rx_ns": ns}``.
+LOST_TOPIC = "/marker/telemetry_lost"
+#: No frame of the analysed vehicle for this long [s of receive time] during a test point: telemetry lost.
+LOST_AFTER_S = 2.0
 #: ArduCopter's flight-mode number of SYSTEMID (custom_mode of HEARTBEAT, Mode of DataFlash MODE).
 ARDUPILOT_SYSTEMID_MODE = 25
 #: How near a grid sample a time may be and still count as on it [fraction of a sample period].
@@ -62,10 +74,10 @@ JUDGE_EVERY_S = 5.0
 CLOSE_WAIT_S = 3.0
 #: A test point is closed when it reaches this length [s] (bounds memory).
 MAX_TEST_POINT_S = 900.0
-#: Samples before a test point compared with it for the excitation check [s].
+#: Samples kept before a test point [s]: a start event that arrives after the samples it opens
+#: (a STATUSTEXT behind the telemetry, a sweep confirmed after 3 s) still finds them, and the
+#: input that moved most is told against this stretch when the evidence does not name it.
 PRE_TEST_S = 20.0
-#: A quiet stretch at least this long is a usable baseline [s]; shorter, the last usable one stands.
-MIN_BASELINE_S = 3.0
 #: Sweep detection confirms a start within this long of it, or gives up (a slow ramp is no sweep) [s].
 _MAX_DETECTION_S = 60.0
 
@@ -84,13 +96,17 @@ class TestPointEvent:
     t_s : float
         Data time [s].
     action : str
-        ``"start"`` or ``"end"``.
+        ``"start"``, ``"end"`` or ``"lost"`` (the telemetry stopped).
     source : str
-        ``"autopilot"``, ``"marker"`` or ``"sweep"``.
+        ``"autopilot"``, ``"marker"``, ``"sweep"`` or ``"monitor"``.
     swept_input : str or None
         The input swept (start only; None when the evidence does not say).
     note : str
         What was seen ("SystemID Starting: axis=7", "terminal: s roll", ...).
+    injection : SweepInjection or None
+        The sweep the autopilot was told to fly (an autopilot start whose parameters are known).
+    axis : int or None
+        The autopilot's SystemID axis (an autopilot start).
     """
 
     t_s: float
@@ -98,6 +114,8 @@ class TestPointEvent:
     source: str
     swept_input: str | None = None
     note: str = ""
+    injection: SweepInjection | None = None
+    axis: int | None = None
 
 
 @dataclass
@@ -110,12 +128,17 @@ class TestPoint:
     note: str
     end_s: float | None = None
     end_note: str = ""
+    injection: SweepInjection | None = None
+    axis: int | None = None
+    unjudged: str = ""                           # why it cannot be judged (an axis the map has no input for)
+    lost: str = ""                               # "telemetry lost ..." when the monitor closed it for that
     t0: list = field(default_factory=list)       # per kept block: start time [s]
     values: list = field(default_factory=list)   # per kept block: (n_signals, n) samples
     valid: list = field(default_factory=list)
     pre: np.ndarray | None = None                # the samples before it (n_signals, n_pre)
     next_judge_s: float = math.inf               # data time of its next judgement while open
     judgement: TestPointJudgement | None = None
+    running: TestPointJudgement | None = None    # the last running judgement
 
     def samples(self) -> tuple[np.ndarray, np.ndarray]:
         """Its samples so far, (values (n_signals, n), valid (n,))."""
@@ -133,19 +156,36 @@ class TestPoint:
         return sum(v.shape[1] for v in self.values) / fs
 
     def record(self, state: str) -> dict:
-        """The ``/livesweep/test_point`` record (docs/outputs.md, live result channels), also shown while it is open."""
-        j = self.judgement
+        """The ``/livesweep/test_point`` record (docs/outputs.md, live result channels), also shown
+        while it is open: ``verdict`` is the closing verdict (WAIT while open), ``running`` the
+        last running one ("GO so far", ...)."""
+        j = self.judgement if state == "closed" else self.running
         out = {"state": state, "start_s": round(self.start_s, 6),
                "end_s": None if self.end_s is None else round(self.end_s, 6), "source": self.source,
                "swept_input": self.swept_input, "note": self.note, "end_note": self.end_note,
-               "verdict": ("NO-GO" if state == "closed" else "WAIT") if j is None else j.verdict,
+               "axis": self.axis, "verdict": "WAIT", "label": "WAIT", "marginal": False,
+               "running": None if self.running is None else self.running.label,
+               "injection": None if self.injection is None else self.injection.to_dict(),
                "pairs": [], "missing": [], "reasons": []}
-        if j is None and state == "closed":
-            out["missing"] = ["no samples of the map's signals during the test point"]
+        if state == "closed":
+            out["verdict"] = out["label"] = "NO-GO" if j is None or self.lost or self.unjudged else j.verdict
         if j is not None:
             d = j.to_dict()
             out.update(pairs=d["pairs"], missing=d["missing"], reasons=d["reasons"],
-                       excited_fraction=d["excited_fraction"], duration_s=d["duration_s"])
+                       excited_fraction=d["excited_fraction"], duration_s=d["duration_s"],
+                       judged_band_rad_s=d["judged_band_rad_s"], swept_band_rad_s=d["swept_band_rad_s"],
+                       excitation=d["excitation"], progress=j.progress())
+            if state == "closed" and out["verdict"] == j.verdict:
+                out.update(label=j.label, marginal=j.marginal)
+        if state == "closed":
+            why = [x for x in (self.unjudged, self.lost) if x]
+            if why:
+                out["missing"] = [*why, *out["missing"]]
+            elif j is None:
+                out["missing"] = ["no samples of the map's signals during the test point"]
+            if self.running is not None and j is not None and self.running.verdict == "GO" and out["verdict"] != "GO":
+                out["reasons"] = [f"NO-GO over the whole test point, although the running verdict was "
+                                  f"{self.running.label} ({self.running.progress()}): see below", *out["reasons"]]
         return out
 
 
@@ -259,11 +299,14 @@ class TestPointTracker:
         Shortest test point that can be GO [s].
     references : dict of input -> reference, optional
         The logged injection of an input.
+    source_rates : callable, optional
+        ``source_rates() -> {signal: Hz}``: the rate each signal arrives at (a pair whose signals
+        arrive too slowly for the top of the band is told so).
     """
 
     def __init__(self, names, inputs, outputs, sample_rate_hz: float, band_rad_s, *, sources=SOURCES,
                  axes: dict | None = None, required: dict | None = None, min_duration_s: float = 10.0,
-                 references: dict | None = None):
+                 references: dict | None = None, source_rates=None):
         self.names, self.inputs, self.outputs = tuple(names), tuple(inputs), tuple(outputs)
         self.fs, self.band = float(sample_rate_hz), (float(band_rad_s[0]), float(band_rad_s[1]))
         self.sources = tuple(sources)
@@ -271,6 +314,9 @@ class TestPointTracker:
         self.required = {i: tuple(v) for i, v in (required or {}).items()}
         self.min_duration_s = float(min_duration_s)
         self.references = dict(references or {})     # input -> its logged injection
+        self.source_rates = source_rates
+        self.vehicle = VehicleInfo()                 # parameters, frame, SystemID settings of the vehicle
+        self.unfit: str = ""                         # why the map does not fit the vehicle (judged NO-GO)
         self.current: TestPoint | None = None
         self.closing: list[TestPoint] = []           # ended, waiting for their last samples
         self.closed: list[dict] = []                 # records of the closed test points, in order
@@ -279,17 +325,25 @@ class TestPointTracker:
         self._sweep = _SweepDetector(self.inputs, self.fs) if "sweep" in self.sources else None
         self._modes: dict = {}                       # (topic, sysid) -> last mode
         self._last_end: float | None = None          # end of the last test point [s]
-        self._baseline: np.ndarray | None = None     # the last quiet stretch before a test point
         self.ignored = 0                             # detected activity shorter than a test point
 
     # -- what it watches ------------------------------------------------------------------------
     def wants(self, topic: str) -> bool:
-        """Whether frames of ``topic`` can carry a test-point event."""
-        if "autopilot" in self.sources and topic in ("/mavlink/STATUSTEXT", "/mavlink/HEARTBEAT", "/dataflash/MSG",
-                                                     "/dataflash/SIDS", "/dataflash/MODE"):
+        """Whether frames of ``topic`` can carry a test-point event or what the vehicle says of itself."""
+        if topic == LOST_TOPIC or VehicleInfo.wants(topic):
+            return True
+        if "autopilot" in self.sources and topic in ("/dataflash/MODE",):
             return True
         return "marker" in self.sources and (topic == MARKER_TOPIC or topic.endswith("/marker")
                                              or topic in ("/mavlink/STATUSTEXT", "/mavlink/NAMED_VALUE_INT"))
+
+    def learn(self, frame: Frame, system) -> None:
+        """What a frame says about the vehicle analysed (``system``; None: not known yet): its
+        parameters, frame and type (:class:`~livesweep.monitor.vehicle.VehicleInfo`). Taken from the
+        first frame on, before any sample exists (a ground station fetches the parameters first)."""
+        sysid = frame.data.get("sysid") if isinstance(frame.data, dict) else None
+        if VehicleInfo.wants(frame.topic) and (sysid is None or system is None or sysid == system):
+            self.vehicle.take(frame)
 
     def required_outputs(self, swept: str) -> tuple:
         if swept in self.required:
@@ -307,10 +361,16 @@ class TestPointTracker:
             return []
         out = []
         auto, marker = "autopilot" in self.sources, "marker" in self.sources
-        if topic in ("/mavlink/STATUSTEXT", "/dataflash/MSG"):
+        if topic == LOST_TOPIC:
+            silent = d.get("silent_s")
+            silent = f" (no frame for {silent:.1f} s)" if isinstance(silent, (int, float)) else ""
+            out.append(TestPointEvent(t_s, "lost", "monitor", note=f"telemetry lost{silent}"))
+        elif topic in ("/mavlink/STATUSTEXT", "/dataflash/MSG"):
             text = str(d.get("text", d.get("Message", "")))
             if auto and (m := _START.search(text)):
-                out.append(TestPointEvent(t_s, "start", "autopilot", self.axes.get(int(m.group(1))), text))
+                axis = int(m.group(1))
+                out.append(TestPointEvent(t_s, "start", "autopilot", self.axes.get(axis), text,
+                                          injection=self.vehicle.injection(axis), axis=axis))
             elif auto and _FINISHED.search(text):
                 out.append(TestPointEvent(t_s, "end", "autopilot", note=text))
             elif marker and (m := _MARKER_TEXT.match(text)):
@@ -318,7 +378,9 @@ class TestPointTracker:
         elif topic == "/dataflash/SIDS" and auto:
             ax = d.get("Ax")
             if isinstance(ax, (int, float)):
-                out.append(TestPointEvent(t_s, "start", "autopilot", self.axes.get(int(ax)), f"SIDS axis {int(ax)}"))
+                axis = int(ax)
+                out.append(TestPointEvent(t_s, "start", "autopilot", self.axes.get(axis), f"SIDS axis {axis}",
+                                          injection=self.vehicle.injection(axis, sids=d), axis=axis))
         elif topic in ("/mavlink/HEARTBEAT", "/dataflash/MODE") and auto:
             if topic == "/mavlink/HEARTBEAT":
                 if d.get("autopilot") != 3 or d.get("type") not in _MULTIROTOR_TYPES:
@@ -332,7 +394,11 @@ class TestPointTracker:
             if before == ARDUPILOT_SYSTEMID_MODE and mode != ARDUPILOT_SYSTEMID_MODE:
                 out.append(TestPointEvent(t_s, "end", "autopilot", note=f"mode {before} -> {mode}"))
             elif before is not None and before != ARDUPILOT_SYSTEMID_MODE and mode == ARDUPILOT_SYSTEMID_MODE:
-                out.append(TestPointEvent(t_s, "start", "autopilot", note=f"mode {before} -> {mode} (SYSTEMID)"))
+                axis = self.vehicle.parameters.get("SID_AXIS")
+                axis = None if axis is None else int(round(axis))
+                out.append(TestPointEvent(t_s, "start", "autopilot", None if axis is None else self.axes.get(axis),
+                                          note=f"mode {before} -> {mode} (SYSTEMID)",
+                                          injection=None if axis is None else self.vehicle.injection(axis), axis=axis))
         elif topic == "/mavlink/NAMED_VALUE_INT" and marker and str(d.get("name", "")).strip() == "LS_TP":
             v = d.get("value")
             if isinstance(v, int):
@@ -351,6 +417,14 @@ class TestPointTracker:
     # -- the state machine ----------------------------------------------------------------------
     def event(self, ev: TestPointEvent) -> list[tuple[float, dict]]:
         """Apply an event; returns ``(data time [s], record)`` of the test points it opened."""
+        if ev.action == "lost":
+            cur = self.current
+            if cur is not None:
+                cur.end_s, cur.end_note = max(ev.t_s, cur.start_s), ev.note
+                cur.lost = f"{ev.note} at {ev.t_s:.1f} s: the test point is incomplete; fly it again"
+                self.closing.append(cur)
+                self.current = None
+            return []
         if ev.source != "sweep":
             if not self.explicit and self.current is not None and self.current.source == "sweep" \
                     and ev.action == "start":
@@ -368,30 +442,39 @@ class TestPointTracker:
         if cur is not None:
             if cur.start_s >= ev.t_s - 2.0:
                 # the same start seen twice (a STATUSTEXT and a mode change, MSG and SIDS): keep the
-                # first, take the input from whichever names it
+                # first, take the input, the axis and the sweep from whichever names them (SIDS
+                # carries the sweep's own parameters: it wins)
                 if cur.swept_input is None and ev.swept_input is not None:
                     cur.swept_input = ev.swept_input
-                return []
+                if cur.axis is None and ev.axis is not None:
+                    cur.axis = ev.axis
+                    cur.unjudged = self._unjudged(ev)
+                if ev.injection is not None and (cur.injection is None or ev.injection.source == "SIDS"):
+                    cur.injection = ev.injection
+                return [(ev.t_s, cur.record("open"))]
             cur.end_s, cur.end_note = ev.t_s, f"a new test point started ({ev.note})"
             self.closing.append(cur)
         return self._open(ev)
 
+    def _unjudged(self, ev: TestPointEvent) -> str:
+        """Why an autopilot start cannot be judged with this map ('' when it can)."""
+        if ev.source != "autopilot" or ev.axis is None or ev.swept_input is not None or not self.axes:
+            return ""
+        return (f"SystemID {axis_name(ev.axis)}: the map names no input for it (its [test_points] axes: "
+                f"{', '.join(str(a) for a in sorted(self.axes))}), so this test point is not judged")
+
     def _open(self, ev: TestPointEvent) -> list[tuple[float, dict]]:
-        tp = TestPoint(ev.t_s, ev.source, ev.swept_input, ev.note)
-        quiet_from = self._last_end if self._last_end is not None else -math.inf
+        tp = TestPoint(ev.t_s, ev.source, ev.swept_input, ev.note, injection=ev.injection, axis=ev.axis,
+                       unjudged=self._unjudged(ev))
         before = []
         for t0, values, valid in self._pre:      # split the recent samples at the start
             k = int(np.clip(math.ceil((ev.t_s - t0) * self.fs - GRID_TOL), 0, values.shape[1]))
-            q = 0 if quiet_from <= t0 else min(int(math.ceil((quiet_from - t0) * self.fs - GRID_TOL)), k)
-            before.append(values[:, q:k])            # the baseline: not the tail of an earlier test point
+            before.append(values[:, :k])
             if k < values.shape[1]:
                 tp.t0.append(t0 + k / self.fs)
                 tp.values.append(values[:, k:])
                 tp.valid.append(valid[k:])
-        pre = np.concatenate(before, axis=1)[:, -int(round(PRE_TEST_S * self.fs)):] if before else None
-        if pre is not None and pre.shape[1] >= MIN_BASELINE_S * self.fs:
-            self._baseline = pre
-        tp.pre = self._baseline                  # else the last quiet stretch seen before one
+        tp.pre = np.concatenate(before, axis=1)[:, -int(round(PRE_TEST_S * self.fs)):] if before else None
         tp.next_judge_s = ev.t_s + max(self.min_duration_s, JUDGE_EVERY_S)
         self.current = tp
         return [(ev.t_s, tp.record("open"))]
@@ -440,13 +523,14 @@ class TestPointTracker:
                     out += self._close(cur)
         return out
 
-    def expire(self, t_s: float) -> list[tuple[float, dict]]:
+    def expire(self, t_s: float, *, lost: bool = False) -> list[tuple[float, dict]]:
         """Close the test points that ended more than :data:`CLOSE_WAIT_S` before data time ``t_s``
         (told by a frame that carries no samples: a HEARTBEAT, a STATUSTEXT) and are still waiting
-        for their last samples; returns their ``(data time [s], record)``."""
+        for their last samples, or, with ``lost`` (the telemetry stopped: nothing more will come),
+        every one; returns their ``(data time [s], record)``."""
         out = []
         for tp in list(self.closing):
-            if t_s >= tp.end_s + CLOSE_WAIT_S:
+            if lost or tp.lost or t_s >= tp.end_s + CLOSE_WAIT_S:
                 out += self._close(tp)
         return out
 
@@ -470,19 +554,26 @@ class TestPointTracker:
         if tp.source == "sweep" and tp.duration_s(self.fs) < self.min_duration_s:
             self.ignored += 1                     # a doublet or a trim change, not a sweep
             return [(tp.end_s, {**tp.record("closed"), "state": "ignored"})]
+        if self.unfit and not tp.unjudged:
+            tp.unjudged = f"the map does not fit the vehicle ({self.unfit}): this test point is not judged"
         self._judge(tp)
         rec = tp.record("closed")
         self.closed.append(rec)
         return [(tp.end_s, rec)]
 
     def _judge(self, tp: TestPoint, until_s: float | None = None) -> None:
-        if not tp.values:
-            tp.judgement = None
+        """The closing judgement (``until_s`` None) or a running one over the samples up to ``until_s``."""
+        final = until_s is None
+        if not tp.values or (tp.unjudged and tp.swept_input is None):
+            if final:
+                tp.judgement = None
             return
         values, valid = tp.samples()
         if until_s is not None:
             n = max(int(math.floor((until_s - tp.t0[0]) * self.fs + GRID_TOL)) + 1, 0)
             values, valid = values[:, :n], valid[:n]
+        if values.shape[1] == 0:
+            return
         swept = tp.swept_input
         if swept is None:                      # the evidence did not say: the input that moved most
             spread = [np.nanstd(values[self.names.index(i)]) for i in self.inputs]
@@ -490,6 +581,13 @@ class TestPointTracker:
                    for i in self.inputs]
             ratios = [s / max(p, 1e-12) if p > 0 else s for s, p in zip(spread, pre)]
             swept = tp.swept_input = self.inputs[int(np.nanargmax(ratios))]
-        tp.judgement = judge_test_point(values, self.names, self.fs, swept, self.required_outputs(swept), self.band,
-                                        valid=valid, pre_values=tp.pre, references=self.references,
-                                        min_duration_s=self.min_duration_s)
+        last = tp.t0[0] + (values.shape[1] - 1) / self.fs
+        rates = self.source_rates() if self.source_rates is not None else None
+        j = judge_test_point(values, self.names, self.fs, swept, self.required_outputs(swept), self.band,
+                             valid=valid, references=self.references, injection=tp.injection,
+                             elapsed_s=last - tp.start_s, final=final, min_duration_s=self.min_duration_s,
+                             source_rates_hz=rates)
+        if final:
+            tp.judgement = j
+        else:
+            tp.running = j

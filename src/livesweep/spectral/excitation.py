@@ -34,7 +34,7 @@ from livesweep.spectral.online import OnlineResult
 from livesweep.spectral.response import FrequencyResponse
 
 __all__ = ["Alert", "PairStatus", "ExcitationStatus", "ExcitationMonitor", "SweepTrack", "track_sweep",
-           "log_band_weights", "ALERT_KINDS"]
+           "half_period_frequencies", "log_band_weights", "ALERT_KINDS"]
 
 ALERT_KINDS = ("coherence_collapse", "input_correlation", "saturation", "data_gap", "packet_loss", "link", "map",
                "verdict")
@@ -206,6 +206,51 @@ def _crossing_times(t: np.ndarray, x: np.ndarray, h: float) -> np.ndarray:
     b = np.searchsorted(zc, k_to, "left") - 1
     ok = b >= a
     return 0.5 * (tz[a[ok]] + tz[b[ok]])
+
+
+def half_period_frequencies(t_s, values, *, hysteresis: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
+    """Instantaneous frequency of an oscillating signal, one value per half-period.
+
+    The signal is centred on the midrange of its 0.5/99.5 % percentiles (a sweep oscillates about
+    trim), zero crossings are found with hysteresis ``hysteresis`` x the peak deviation (noise on a
+    quiet stretch crosses nothing), and each half-period ``d`` between consecutive crossings gives
+    ``omega = pi / d`` at its midpoint (docs/method.md §2.5: the instantaneous frequency of the input
+    from its zero-crossing spacing).
+
+    Parameters
+    ----------
+    t_s : ndarray
+        Sample times [s], increasing.
+    values : ndarray
+        Samples (NaN = missing).
+    hysteresis : float
+        Threshold as a fraction of the peak deviation.
+
+    Returns
+    -------
+    t_mid : ndarray
+        Midpoints of the half-periods [s].
+    omega : ndarray
+        Their frequencies [rad/s].
+    """
+    t = np.asarray(t_s, float)
+    x = np.asarray(values, float)
+    ok = np.isfinite(x) & np.isfinite(t)
+    t, x = t[ok], x[ok]
+    empty = (np.empty(0), np.empty(0))
+    if x.size < 8:
+        return empty
+    lo, hi = np.percentile(x, [0.5, 99.5])
+    x0 = x - 0.5 * (lo + hi)
+    peak = float(np.max(np.abs(x0)))
+    if peak == 0.0:
+        return empty
+    c = _crossing_times(t, x0, hysteresis * peak)
+    d = np.diff(c)
+    keep = d > 0
+    if not np.any(keep):
+        return empty
+    return (0.5 * (c[1:] + c[:-1]))[keep], np.pi / d[keep]
 
 
 def track_sweep(t_s, values, *, hysteresis: float = 0.3, fit_s: float = 20.0, min_half_periods: int = 3,

@@ -3,20 +3,36 @@
 A test point is the stretch of flight in which one input is swept (docs/method.md §2). The live monitor
 collects its aligned samples and, while it runs and when it closes, asks :func:`judge_test_point`:
 
+* **The judged band.** When the autopilot flies the sweep itself and the monitor knows what it was
+  told (:class:`~livesweep.spectral.injection.SweepInjection`: ArduCopter's ``SID_F_START_HZ`` to
+  ``SID_F_STOP_HZ``), the band the autopilot was told to sweep; otherwise the map's band.
 * **Responses over the whole test point.** The same composite of several window lengths the
   offline identification uses (:func:`livesweep.spectral.analysis.analyze`): the swept input is
   the only input (SISO, ordinary coherence: during a single-axis sweep the other inputs are the
   controller's reaction, not exogenous), or, when the map names the logged injection as the
   swept input's reference, the response through it (coherence "partial"). Each required pair is
   adequate where gamma^2 >= 0.6 and eps_r <= 0.2 (docs/method.md §2.5); its adequate fraction is
-  measured in decades of the requested band, the part a record this short cannot resolve
-  (3 periods in half the record) counting as not adequate.
-* **Real excitation.** The swept input's autospectrum during the test point must stand
-  ``excitation_margin_db`` (10 dB) above its level before the test point, and within 20 dB of its
-  own 90th percentile over the band (a real part of the sweep, not leakage), over at least
-  ``required_fraction`` of the band, so a constant trim, a motor spooling up, the pilot's usual
-  corrections or a sweep stopped early are never called a full sweep. Without a pre-test record
-  the check is skipped and a reason says so.
+  measured in decades of the judged band, the part a record this short cannot resolve (3 periods
+  in half the record) counting as not adequate.
+* **Real excitation**, judged against what was injected, never against a baseline flown before
+  the test point (a take-off or a loiter has manoeuvres of its own): with a known injection, the
+  input counts as swept from the sweep's start frequency up to the frequency the injection has
+  reached; with a logged injection (a reference), over the frequencies the reference's own
+  oscillation passed through (the instantaneous frequency of its zero crossings, docs/method.md
+  §2.5); with neither, over those the input's oscillation passed through. A sweep stopped early
+  never reached the frequencies above, whatever the leakage of a short window would say, and is
+  never called a full sweep; a window too short to resolve the lowest frequencies does not hide
+  the periods the sweep flew there.
+* **A verdict with its margin.** Each rule says how far it is from its threshold. The adequate
+  fraction of a pair is uncertain by the coherence estimate's random error (Bendat & Piersol:
+  ``sigma(gamma^2) = 2 gamma^2 eps_r sqrt(1 - gamma^2)`` with ``eps_r`` the response's normalised
+  random error): counting only the frequencies adequate at ``gamma^2 - sigma`` and every frequency
+  adequate at ``gamma^2 + sigma`` brackets it. A verdict the bracket of a deciding rule straddles
+  reads "(marginal)": another flight of the same sweep, or a few lost frames, may decide it the
+  other way. A clear verdict does not flip.
+* **Running and final.** While the test point runs it is judged over the band swept so far ("GO so
+  far: 0.5-2.9 Hz of 0.5-12 Hz swept"); the closing verdict is judged once, over the whole test
+  point and the whole band.
 * **GO** when the test point lasted ``min_duration_s``, the input was excited and every required
   pair is adequate over ``required_fraction`` (60 %) of the band; otherwise **NO-GO**, with what is
   missing in words an operator can act on: which band of which pair, and for a gap at the bottom
@@ -37,21 +53,36 @@ from livesweep.errors import ConfigError
 from livesweep.numbers import percent as _percent
 from livesweep.spectral.adequacy import MAX_RANDOM_ERROR, MIN_COHERENCE, REQUIRED_FRACTION
 from livesweep.spectral.analysis import analyze
-from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW, window_spectra
+from livesweep.spectral.excitation import half_period_frequencies
+from livesweep.spectral.injection import SweepInjection
+from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW
 from livesweep.spectral.windows import longest_window_samples
 
-__all__ = ["PairJudgement", "TestPointJudgement", "judge_test_point", "REQUIRED_FRACTION", "EXCITATION_MARGIN_DB",
-           "LOW_FREQUENCY_PERIODS", "COVERAGE_DROP_DB"]
+__all__ = ["PairJudgement", "TestPointJudgement", "judge_test_point", "REQUIRED_FRACTION", "LOW_FREQUENCY_PERIODS",
+           "NYQUIST_FRACTION", "coherence_sigma"]
 
-#: The swept input's power must stand this far above its pre-test level [dB].
-EXCITATION_MARGIN_DB = 10.0
 #: Periods of its lowest frequency a sweep needs to resolve it (docs/method.md §2.5, T_rec >= 4-5 T_max).
 LOW_FREQUENCY_PERIODS = 4.0
-#: The swept input's power counts where it is within this of its 90th percentile over the band [dB]
-#: (docs/method.md §2.5: no holes deeper than about 20 dB; an exponential sweep over two decades slopes 17-18).
-COVERAGE_DROP_DB = 20.0
+#: The judged band ends at most this fraction of the grid's Nyquist frequency (the composite's
+#: zero-padded grid and the resampler's interpolation both distort the last fifth).
+NYQUIST_FRACTION = 0.8
 #: Adequate stretches narrower than this [decades] do not split what is missing into pieces.
 _MIN_ISLAND_DECADES = 0.1
+#: A band swept so far narrower than this [decades] is not judged yet.
+_MIN_SWEPT_DECADES = 0.05
+
+
+def coherence_sigma(coherence: np.ndarray, random_error: np.ndarray) -> np.ndarray:
+    """Standard deviation of a coherence estimate from the response's normalised random error.
+
+    Bendat & Piersol: ``sigma(gamma^2) / gamma^2 = sqrt(2) (1 - gamma^2) / (|gamma| sqrt(n_d))`` and
+    ``eps_r = sqrt(1 - gamma^2) / (|gamma| sqrt(2 n_d))``, hence ``sigma(gamma^2) = 2 gamma^2 eps_r
+    sqrt(1 - gamma^2)``: the number of averages need not be known. NaN where either is not finite.
+    """
+    g = np.clip(np.asarray(coherence, float), 0.0, 1.0)
+    e = np.asarray(random_error, float)
+    with np.errstate(invalid="ignore"):
+        return np.where(np.isfinite(e), 2.0 * g * np.where(np.isfinite(e), e, 0.0) * np.sqrt(1.0 - g), np.nan)
 
 
 @dataclass(frozen=True)
@@ -62,7 +93,9 @@ class PairJudgement:
     ----------
     output, input : str
     adequate_fraction : float
-        Fraction of the requested band (decades) where gamma^2 >= 0.6 and eps_r <= 0.2.
+        Fraction of the judged band (decades) where gamma^2 >= 0.6 and eps_r <= 0.2.
+    adequate_range : (float, float)
+        The fraction counted at ``gamma^2 -/+`` its random error (``coherence_sigma``).
     band_rad_s : (float, float) or None
         The widest adequate stretch [rad/s].
     bands_rad_s : tuple of (float, float)
@@ -80,6 +113,12 @@ class PairJudgement:
     bands_rad_s: tuple
     coherence: str
     median_coherence: float
+    adequate_range: tuple = (0.0, 0.0)
+
+    def marginal(self, required: float) -> bool:
+        """The threshold lies within the fraction's random error (the bracket straddles it)."""
+        lo, hi = self.adequate_range
+        return lo < required <= hi
 
 
 @dataclass(frozen=True)
@@ -90,21 +129,36 @@ class TestPointJudgement:
     ----------
     swept_input : str
     verdict : str
-        ``"GO"`` or ``"NO-GO"``.
+        ``"GO"`` or ``"NO-GO"`` (``final`` False: so far, over the band swept so far).
+    final : bool
+        Judged over the whole test point and the whole band (the closing verdict).
+    band_rad_s : (float, float)
+        The judged band [rad/s] (the injection's when it is known, else the map's).
+    swept_rad_s : (float, float) or None
+        The part of it swept so far [rad/s] (the injection's progress, or where the input or its
+        reference has power); None when nothing is swept yet.
     pairs : tuple of PairJudgement
         The required pairs.
     excited_fraction : float or None
-        Fraction of the band (decades) where the swept input stood ``EXCITATION_MARGIN_DB`` above
-        its pre-test level; None without a pre-test record.
+        Fraction of the judged band (decades) swept; None when it cannot be told.
+    excitation : str
+        What the sweep was judged from: ``"injection"`` (the autopilot's parameters),
+        ``"reference"`` (a logged injection) or ``"input"`` (the input's own spectrum).
+    marginal : bool
+        A deciding rule is within its random error of the threshold.
     missing : tuple of str
         What a GO still needs, one line each (empty for GO).
     reasons : tuple of str
-        Why, one line per check.
+        Why, one line per rule, each with its distance from the threshold.
     duration_s : float
-        Length of the test point [s].
+        Length of the test point's samples [s].
     resolvable_from_rad_s : float
         The lowest frequency the record's length resolves [rad/s].
+    injection : SweepInjection or None
+        What the autopilot was told to inject, when known.
     """
+
+    __test__ = False                  # not a pytest class, whatever its name says
 
     swept_input: str
     verdict: str
@@ -114,14 +168,40 @@ class TestPointJudgement:
     reasons: tuple
     duration_s: float
     resolvable_from_rad_s: float
+    final: bool = True
+    band_rad_s: tuple = (0.0, 0.0)
+    swept_rad_s: tuple | None = None
+    excitation: str = "input"
+    marginal: bool = False
+    injection: SweepInjection | None = None
+
+    @property
+    def label(self) -> str:
+        """``GO``, ``NO-GO``, ``GO (marginal)``, ``GO so far``, ..."""
+        return self.verdict + ("" if self.final else " so far") + (" (marginal)" if self.marginal else "")
+
+    def progress(self) -> str:
+        """``"0.5-2.9 Hz of 0.5-12 Hz swept"``: how much of the judged band the sweep has covered."""
+        lo, hi = self.band_rad_s
+        hz = 1 / (2 * math.pi)
+        if self.swept_rad_s is None:
+            return f"nothing of {lo * hz:.3g}-{hi * hz:.3g} Hz swept yet"
+        a, b = self.swept_rad_s
+        return f"{a * hz:.3g}-{b * hz:.3g} Hz of {lo * hz:.3g}-{hi * hz:.3g} Hz swept"
 
     def to_dict(self) -> dict:
-        """The ``pairs``/``missing`` part of the ``/livesweep/test_point`` record (docs/outputs.md, live result channels)."""
+        """The judgement part of the ``/livesweep/test_point`` record (docs/outputs.md, live result channels)."""
+        r = lambda x: None if x is None else [round(float(v), 4) for v in x]      # noqa: E731
         return {
-            "swept_input": self.swept_input, "verdict": self.verdict, "duration_s": round(self.duration_s, 3),
+            "swept_input": self.swept_input, "verdict": self.verdict, "final": self.final, "label": self.label,
+            "marginal": self.marginal, "duration_s": round(self.duration_s, 3),
+            "judged_band_rad_s": r(self.band_rad_s), "swept_band_rad_s": r(self.swept_rad_s),
+            "excitation": self.excitation,
+            "injection": None if self.injection is None else self.injection.to_dict(),
             "pairs": [{"output": p.output, "input": p.input, "adequate_fraction": round(p.adequate_fraction, 4),
-                       "band_rad_s": None if p.band_rad_s is None else [round(b, 4) for b in p.band_rad_s],
-                       "coherence": p.coherence, "median_coherence": round(p.median_coherence, 4)}
+                       "adequate_range": [round(p.adequate_range[0], 4), round(p.adequate_range[1], 4)],
+                       "band_rad_s": r(p.band_rad_s), "coherence": p.coherence,
+                       "median_coherence": round(p.median_coherence, 4)}
                       for p in self.pairs],
             "excited_fraction": None if self.excited_fraction is None else round(self.excited_fraction, 4),
             "missing": list(self.missing), "reasons": list(self.reasons),
@@ -176,43 +256,80 @@ def _describe_gap(pair: str, a: float, b: float, lo: float, hi: float, resolvabl
     return f"{pair} needs {band}: coherence below {MIN_COHERENCE:g} there (more amplitude, or repeat the sweep)"
 
 
-def _excited_bands(x_tp: np.ndarray, x_pre: np.ndarray, sample_rate_hz: float, band_rad_s,
-                   margin_db: float) -> tuple[tuple, float] | None:
-    """(stretches [rad/s], lowest frequency compared [rad/s]) where the input was swept: its
-    autospectrum during the test point stands ``margin_db`` above its autospectrum before it (both
-    with one window, the longest the shorter record allows, up to 20 s) and within
-    ``COVERAGE_DROP_DB`` of the 90th percentile of its autospectrum over the whole band (a window of
-    half the test point, up to 60 s: the reference a sweep stopped early cannot fake with leakage);
-    None when the two records cannot be compared."""
+def _swept_bands(x: np.ndarray, sample_rate_hz: float, band_rad_s) -> tuple | None:
+    """Stretches [rad/s] of ``band_rad_s`` the oscillation of ``x`` passed through: the
+    instantaneous frequencies of its half-periods (:func:`half_period_frequencies`) on a log grid,
+    holes narrower than ``_MIN_ISLAND_DECADES`` bridged (a sweep spends one half-period per cell at
+    its lowest frequencies); None when the record is too short to tell."""
     lo, hi = band_rad_s
-    n = min(x_pre.size, x_tp.size // 2, int(20.0 * sample_rate_hz))
-    if n < 16:
+    if x.size < 16:
         return None
-    window_s = n / sample_rate_hz
-    lo_w = max(lo, MIN_PERIODS_PER_WINDOW * 2 * math.pi / window_s)
-    ref_s = min(x_tp.size // 2, int(60.0 * sample_rate_hz)) / sample_rate_hz
-    lo_ref = max(lo, MIN_PERIODS_PER_WINDOW * 2 * math.pi / ref_s)
-    if lo_w >= hi or lo_ref >= hi:
-        return None
-    try:
-        tp = window_spectra(x_tp[None, :], ["x"], sample_rate_hz, window_s, (lo_w, hi))
-        pre = window_spectra(x_pre[None, :], ["x"], sample_rate_hz, window_s, (lo_w, hi))
-        ref = window_spectra(x_tp[None, :], ["x"], sample_rate_hz, ref_s, (lo_ref, hi))
-    except ConfigError:
-        return None
-    omega = np.geomspace(lo_w, hi, 200)                     # judged in decades, as the pairs are
-    g_tp = np.interp(omega, tp.omega, tp.G[0, 0].real)
-    g_pre = np.interp(omega, pre.omega, pre.G[0, 0].real)
-    level = np.percentile(np.interp(np.geomspace(lo_ref, hi, 200), ref.omega, ref.G[0, 0].real), 90)
-    ok = (g_tp > g_pre * 10 ** (margin_db / 10)) & (g_tp >= level * 10 ** (-COVERAGE_DROP_DB / 10))
-    return _adequate_bands(omega, ok), lo_w
+    _, w = half_period_frequencies(np.arange(x.size) / sample_rate_hz, x)
+    w = w[(w >= lo * 10 ** -_MIN_ISLAND_DECADES) & (w <= hi * 10 ** _MIN_ISLAND_DECADES)]
+    if w.size < 2:
+        return ()
+    grid = np.geomspace(lo, hi, 200)                        # judged in decades, as the pairs are
+    hit = np.zeros(grid.size, bool)
+    k = np.clip(np.searchsorted(grid, w), 0, grid.size - 1)
+    hit[k] = True
+    cells = int(math.ceil(_MIN_ISLAND_DECADES / math.log10(grid[1] / grid[0])))
+    filled = hit.copy()
+    idx = np.flatnonzero(hit)
+    for a, b in zip(idx[:-1], idx[1:]):
+        if b - a <= cells:
+            filled[a:b] = True
+    return _adequate_bands(grid, filled)
+
+
+def _contiguous(bands) -> tuple[float, float] | None:
+    """The covered stretch from the lowest covered frequency up to the first hole wider than
+    ``_MIN_ISLAND_DECADES`` (the sweep's progress: islands above a hole do not count)."""
+    out = None
+    for a, b in sorted(bands):
+        if out is None:
+            out = (a, b)
+        elif a <= out[1] * 10 ** _MIN_ISLAND_DECADES:
+            out = (out[0], max(out[1], b))
+        else:
+            break
+    return out
+
+
+def _pair(analysis, ref, o: str, swept: str, lo: float, hi: float, kind: str) -> PairJudgement:
+    rs = analysis.referenced if ref else analysis.siso
+    r = rs.pair(o, swept)
+    finite = np.isfinite(r.H) & np.isfinite(r.coherence) & np.isfinite(r.random_error)
+    g = np.where(finite, r.coherence, 0.0)
+    eps = np.where(finite, r.random_error, np.inf)
+    ok = finite & (g >= MIN_COHERENCE) & (eps <= MAX_RANDOM_ERROR)
+    bands = _adequate_bands(r.omega, ok)
+    frac = _log_fraction(bands, lo, hi)
+    # the bracket: the coherence at -/+ its random error, with eps_r scaled as sqrt(1 - g) / sqrt(g)
+    sigma = np.where(finite, coherence_sigma(g, eps), 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        shape = np.sqrt(np.clip(1.0 - g, 0.0, None) / np.clip(g, 1e-12, None))
+        out = []
+        for gg in (np.clip(g - sigma, 0.0, 1.0), np.clip(g + sigma, 0.0, 1.0)):
+            e = np.where(shape > 0, eps * np.sqrt(np.clip(1.0 - gg, 0.0, None) / np.clip(gg, 1e-12, None)) / shape,
+                         eps)
+            out.append(_log_fraction(_adequate_bands(r.omega, finite & (gg >= MIN_COHERENCE)
+                                                     & (e <= MAX_RANDOM_ERROR)), lo, hi))
+    widest = max(bands, key=lambda b: math.log(b[1] / b[0]), default=None)
+    med = float(np.median(r.coherence[finite])) if np.any(finite) else 0.0
+    return PairJudgement(o, swept, frac, widest, bands, kind, med, (min(out[0], frac), max(out[1], frac)))
+
+
+def _points(frac: float, required: float) -> str:
+    """Distance from the threshold in percentage points, signed."""
+    d = 100.0 * (frac - required)
+    return f"{d:+.0f} points" if abs(d) >= 0.5 else f"{d:+.1f} points"
 
 
 def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_input: str, outputs, band_rad_s, *,
-                     valid: np.ndarray | None = None, pre_values: np.ndarray | None = None,
-                     references: dict | None = None, required_fraction: float = REQUIRED_FRACTION,
-                     min_duration_s: float = 10.0,
-                     excitation_margin_db: float = EXCITATION_MARGIN_DB) -> TestPointJudgement:
+                     valid: np.ndarray | None = None, references: dict | None = None,
+                     injection: SweepInjection | None = None, elapsed_s: float | None = None, final: bool = True,
+                     required_fraction: float = REQUIRED_FRACTION, min_duration_s: float = 10.0,
+                     source_rates_hz: dict | None = None) -> TestPointJudgement:
     """The verdict on a test point from its aligned samples.
 
     Parameters
@@ -226,15 +343,24 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
     outputs : sequence of str
         The outputs whose pairs with ``swept_input`` must be adequate.
     band_rad_s : (float, float)
-        The requested band [rad/s].
+        The map's band [rad/s]; the injection's replaces it when ``injection`` is given.
     valid : ndarray of bool, shape (n_samples,), optional
         False in data gaps.
-    pre_values : ndarray, shape (n_signals, n_pre), optional
-        Samples just before the test point (for the excitation check).
     references : dict of input -> reference signal, optional
         The logged injection of an input (responses through it, coherence "partial").
-    required_fraction, min_duration_s, excitation_margin_db : float
+    injection : SweepInjection, optional
+        What the autopilot was told to inject (its band and schedule).
+    elapsed_s : float, optional
+        Time from the test point's start to its last sample [s] (how far the injection has got);
+        default the samples' length.
+    final : bool
+        True: the closing verdict, over the whole judged band. False: a running verdict, over the
+        band swept so far.
+    required_fraction, min_duration_s : float
         The GO criteria (see the module docstring).
+    source_rates_hz : dict of str -> float, optional
+        The rate each signal arrives at [Hz]: a pair whose signals arrive too slowly to show the
+        top of the band is told so.
 
     Returns
     -------
@@ -242,66 +368,112 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
     """
     values = np.atleast_2d(np.asarray(values, float))
     names = list(names)
-    lo, hi = float(band_rad_s[0]), float(band_rad_s[1])
     n = values.shape[1]
     duration = n / sample_rate_hz
-    resolvable = MIN_PERIODS_PER_WINDOW * 2 * math.pi / max(longest_window_samples(n) / sample_rate_hz, 1e-9)
+    elapsed = duration if elapsed_s is None else float(elapsed_s)
     reasons, missing = [], []
+    top = NYQUIST_FRACTION * math.pi * sample_rate_hz
+    lo, hi = (float(b) for b in (injection.band_rad_s if injection is not None else band_rad_s))
+    if hi > top:
+        reasons.append(f"the judged band ends at {top:.3g} rad/s, {NYQUIST_FRACTION:g} of the Nyquist frequency of "
+                       f"the {sample_rate_hz:g} Hz grid (asked for up to {hi:.3g} rad/s)")
+        hi = top
+    if not lo < hi:
+        raise ConfigError(f"test point band {lo:g}-{hi:g} rad/s is empty (grid {sample_rate_hz:g} Hz)")
+    resolvable = MIN_PERIODS_PER_WINDOW * 2 * math.pi / max(longest_window_samples(n) / sample_rate_hz, 1e-9)
     ref = (references or {}).get(swept_input)
     kind = "partial" if ref else "ordinary"
+
+    # what was swept: the injection's progress, or where the reference or the input has power
+    excitation = "injection" if injection is not None else "reference" if ref else "input"
+    swept_bands: tuple | None
+    if injection is not None:
+        sb = injection.swept_band(elapsed)
+        swept_bands = () if sb is None else ((sb[0], sb[1]),)
+    else:
+        row = names.index(ref if ref else swept_input) if (ref or swept_input) in names else None
+        swept_bands = None if row is None else _swept_bands(values[row], sample_rate_hz, (lo, hi))
+    swept = None if not swept_bands else _contiguous(swept_bands)
+    if swept is not None:
+        swept = (max(swept[0], lo), min(swept[1], hi))
+        swept = swept if swept[1] > swept[0] else None
+
+    # the band judged now: all of it at the close, the part swept so far while running
+    j_hi = hi
+    if not final:
+        if swept is None or math.log10(swept[1] / max(swept[0], lo)) < _MIN_SWEPT_DECADES:
+            return TestPointJudgement(swept_input, "NO-GO", (), None, ("nothing swept yet",),
+                                      (f"{swept_input}: nothing of {lo:.3g}-{hi:.3g} rad/s swept yet",), duration,
+                                      resolvable, final=False, band_rad_s=(lo, hi), swept_rad_s=None,
+                                      excitation=excitation, injection=injection)
+        j_hi = swept[1]
+    band_text = f"{lo:.3g}-{j_hi:.3g} rad/s"
+
     pairs = []
     lo_eff = max(lo, resolvable * (1 + 1e-9))
     analysis = None
-    if duration >= min_duration_s and lo_eff < hi:
+    if duration >= min_duration_s and lo_eff < j_hi:
         try:
-            analysis = analyze(values, names, sample_rate_hz, [swept_input], list(outputs), (lo_eff, hi), valid=valid,
-                               references=[ref] if ref else None)
+            analysis = analyze(values, names, sample_rate_hz, [swept_input], list(outputs), (lo_eff, j_hi),
+                               valid=valid, references=[ref] if ref else None)
         except ConfigError as e:
             reasons.append(f"no responses: {e}")
     for o in outputs:
         pair = f"{o}/{swept_input}"
         if analysis is None:
             pairs.append(PairJudgement(o, swept_input, 0.0, None, (), kind, 0.0))
-            missing.append(f"{pair} needs {lo:.3g}-{hi:.3g} rad/s: a longer test point "
+            missing.append(f"{pair} needs {lo:.3g}-{j_hi:.3g} rad/s: a longer test point "
                            f"(at least {min_duration_s:g} s, {LOW_FREQUENCY_PERIODS:g} periods at {lo:.3g} rad/s = "
                            f"{LOW_FREQUENCY_PERIODS * 2 * math.pi / lo:.0f} s)")
             continue
-        rs = analysis.referenced if ref else analysis.siso
-        r = rs.pair(o, swept_input)
-        ok = (r.coherence >= MIN_COHERENCE) & (r.random_error <= MAX_RANDOM_ERROR) & np.isfinite(r.H)
-        bands = _adequate_bands(r.omega, ok)
-        frac = _log_fraction(bands, lo, hi)
-        widest = max(bands, key=lambda b: math.log(b[1] / b[0]), default=None)
-        pairs.append(PairJudgement(o, swept_input, frac, widest, bands, kind, float(np.median(r.coherence))))
-        word = "adequate" if frac >= required_fraction else "NOT adequate"
-        reasons.append(f"{pair}: {_percent(frac, required_fraction)} of {lo:g}-{hi:g} rad/s {word} "
-                       f"(need {_percent(required_fraction, required_fraction)}, {kind} coherence)")
-        if frac < required_fraction:
-            missing += [_describe_gap(pair, a, b, lo, hi, resolvable, duration) for a, b in _gaps(bands, lo, hi)]
-    excited, compared = None, None
-    if pre_values is not None and swept_input in names:
-        k = names.index(swept_input)
-        pre = np.asarray(pre_values, float)[k]
-        pre = pre[np.isfinite(pre)]
-        x = values[k]
-        x = np.where(np.isfinite(x), x, np.nanmean(x))
-        compared = _excited_bands(x - x.mean(), pre - pre.mean(), sample_rate_hz, (lo, hi), excitation_margin_db) \
-            if pre.size >= 16 else None
-    if compared is None:
-        reasons.append(f"{swept_input}: no quiet record before the test point to compare its power with")
+        p = _pair(analysis, ref, o, swept_input, lo, j_hi, kind)
+        pairs.append(p)
+        ok = p.adequate_fraction >= required_fraction
+        a, b = p.adequate_range
+        tag = " (marginal)" if p.marginal(required_fraction) else ""
+        reasons.append(f"{pair}: {_percent(p.adequate_fraction, required_fraction)} of {band_text} "
+                       f"{'adequate' if ok else 'NOT adequate'}{tag} (need {_percent(required_fraction)}: "
+                       f"{_points(p.adequate_fraction, required_fraction)}; {100 * a:.0f}-{100 * b:.0f} % within the "
+                       f"random error; {kind} coherence)")
+        if not ok:
+            missing += [_describe_gap(pair, ga, gb, lo, j_hi, resolvable, duration)
+                        for ga, gb in _gaps(p.bands_rad_s, lo, j_hi)]
+        for sig in (swept_input, o):
+            rate = (source_rates_hz or {}).get(sig)
+            if rate and math.pi * rate < j_hi and not ok:
+                reasons.append(f"{sig} arrives at {rate:.3g} Hz: it cannot show above {math.pi * rate:.3g} rad/s "
+                               "(half its rate); send it faster")
+
+    excited = None if swept_bands is None else _log_fraction(swept_bands, lo, j_hi)
+    if excited is None:
+        reasons.append(f"{swept_input}: too little of the test point to tell what was swept")
     else:
-        bands, lo_w = compared
-        excited = _log_fraction(bands, lo_w, hi)          # of the part the two records can compare
-        word = "excited" if excited >= required_fraction else "NOT excited"
-        reasons.append(f"{swept_input}: {excitation_margin_db:g} dB above its level before the test point over "
-                       f"{_percent(excited, required_fraction)} of {lo_w:.3g}-{hi:g} rad/s: {word}")
-        if excited < required_fraction:
-            gaps = ", ".join(f"{a:.3g}-{b:.3g}" for a, b in _gaps(bands, lo_w, hi))
-            missing.append(f"{swept_input} needs a sweep over {gaps} rad/s: its power there is within "
-                           f"{excitation_margin_db:g} dB of its level before the test point")
+        what = {"injection": f"the injection ({injection.describe()}) has reached"
+                             if injection is not None else "",
+                "reference": f"its reference {ref} oscillated over",
+                "input": "it oscillated over"}[excitation]
+        if excitation == "injection":
+            reached = f"{what} {swept[1]:.3g} rad/s" if swept is not None else f"{what} nothing of the band yet"
+        else:
+            reached = f"{what} {swept[0]:.3g}-{swept[1]:.3g} rad/s" if swept is not None else f"{what} none of the band"
+        word = "swept" if excited >= required_fraction else "NOT swept"
+        reasons.append(f"{swept_input}: {_percent(excited, required_fraction)} of {band_text} {word} "
+                       f"(need {_percent(required_fraction)}: {_points(excited, required_fraction)}): {reached}")
+        if final and excited < required_fraction:
+            gaps = ", ".join(f"{a:.3g}-{b:.3g}" for a, b in _gaps(swept_bands, lo, j_hi))
+            missing.append(f"{swept_input} needs a sweep over {gaps} rad/s: {reached}")
     if duration < min_duration_s:
         reasons.insert(0, f"test point {duration:.1f} s long, shorter than {min_duration_s:g} s")
-    go = (duration >= min_duration_s and bool(pairs) and all(p.adequate_fraction >= required_fraction for p in pairs)
-          and (excited is None or excited >= required_fraction))
+    pairs_ok = bool(pairs) and all(p.adequate_fraction >= required_fraction for p in pairs)
+    excited_ok = excited is not None and excited >= required_fraction
+    go = duration >= min_duration_s and pairs_ok and excited_ok
+    if go:
+        marginal = any(p.marginal(required_fraction) for p in pairs)
+    else:
+        failing = [p for p in pairs if p.adequate_fraction < required_fraction]
+        marginal = (duration >= min_duration_s and excited_ok and bool(failing)
+                    and all(p.marginal(required_fraction) for p in failing))
     return TestPointJudgement(swept_input, "GO" if go else "NO-GO", tuple(pairs), excited,
-                              () if go else tuple(missing), tuple(reasons), duration, resolvable)
+                              () if go else tuple(missing), tuple(reasons), duration, resolvable, final=final,
+                              band_rad_s=(lo, hi), swept_rad_s=swept, excitation=excitation, marginal=marginal,
+                              injection=injection)

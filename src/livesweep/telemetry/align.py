@@ -2,7 +2,10 @@
 
 * **One clock.** Every signal is timed by its stamp field (vehicle time) when the channel map
   names one, else by the receive time; a map that mixes the two is refused (the clocks are not
-  comparable).
+  comparable). A message without a time field (MAVLink PID_TUNING) may borrow one from another
+  topic of the same vehicle (``stamp_topic``): it takes the stamp of the latest such frame received
+  before it, at most ``BORROW_WITHIN_S`` of receive time earlier, so it stays on the vehicle clock
+  at any replay speed.
 * **Stamps are checked before use.** Each (topic, stamp field) has its own
   :class:`~livesweep.telemetry.clock.StampClock`: a stamp that does not follow the stream's
   recent clock (a corrupt or forged frame, a value from another epoch, one stamp a few seconds
@@ -51,6 +54,7 @@ import bisect
 import functools
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -65,6 +69,8 @@ __all__ = ["AlignedBlock", "GridAligner", "as_number"]
 _EPS_S = 1e-7   # stamps within 0.1 us of a grid time are on it (grid times carry float round-off)
 _FIRST_SAMPLES = 4   # a signal's spacing is the median of its first few (the grid starts once all have one)
 _SAME_REBOOT_S = 10.0   # re-anchorings of one vehicle this close (offset and new stamps) are one reboot
+#: A borrowed stamp (``stamp_topic``) is taken from a frame received at most this long before [s].
+BORROW_WITHIN_S = 0.5
 
 
 def _wrap_units(topic: str, field: str) -> int | None:
@@ -169,8 +175,16 @@ class GridAligner:
             if all(self.extractors[n].follows_vehicle_lock and not self.extractors[n].conditions for n in ns):
                 g: dict[tuple, list[str]] = {}
                 for n in ns:
-                    g.setdefault((self.specs[n].stamp, None), []).append(n)
+                    g.setdefault((self.specs[n].stamp, self.specs[n].stamp_topic, None), []).append(n)
                 self._plain_groups[t] = g
+        #: stamp topic -> the stamp fields borrowed from it (signals with ``stamp_topic``)
+        self.stamp_topics: dict[str, tuple[str, ...]] = {}
+        for spec in self.specs.values():
+            if spec.stamp_topic:
+                fields = self.stamp_topics.setdefault(spec.stamp_topic, ())
+                if spec.stamp not in fields:
+                    self.stamp_topics[spec.stamp_topic] = (*fields, spec.stamp)
+        self._borrowed: dict[tuple, tuple[Any, int]] = {}   # (stamp topic, field, sysid) -> (raw stamp, receive ns)
         #: Per signal: samples taken, and frames of its topic that gave it none (missing_field,
         #: not_a_number, filtered by its sysid/compid/where, other_vehicle: left out by the lock).
         self.signal_counts = {n: dict.fromkeys(SIGNAL_COUNT_KEYS, 0) for n in self.names}
@@ -190,13 +204,15 @@ class GridAligner:
                        "samples_expired": 0}
 
     # -- input ------------------------------------------------------------------------------
-    def _clock(self, frame: Frame, stamp: str, scale: float, key: tuple | None = None) -> StampClock:
-        """The stamp clock of (topic, stamp field), or of ``key`` (a signal with its own sysid/compid)."""
-        key = key or (frame.topic, stamp)
+    def _clock(self, frame: Frame, stamp: str, scale: float, key: tuple | None = None,
+               stamp_topic: str | None = None) -> StampClock:
+        """The stamp clock of (topic, stamp field), or of ``key`` (a signal with its own sysid/compid);
+        a borrowed stamp wraps as the field of ``stamp_topic`` does."""
+        key = key or ((frame.topic, stamp) if stamp_topic is None else (frame.topic, stamp, stamp_topic))
         c = self.clocks.get(key)
         if c is None:
             vehicle = frame.data.get("sysid", frame.topic)
-            c = self.clocks[key] = StampClock(scale, wrap_units=_wrap_units(frame.topic, stamp),
+            c = self.clocks[key] = StampClock(scale, wrap_units=_wrap_units(stamp_topic or frame.topic, stamp),
                                               reset_gap_s=self.reset_gap_s, establish=True,
                                               reanchor=functools.partial(self._reanchor, vehicle))
         return c
@@ -263,31 +279,52 @@ class GridAligner:
                     continue
             spec = self.specs[n]
             own = None if ex.follows_vehicle_lock else (spec.sysid, spec.compid)
-            groups.setdefault((spec.stamp, own), []).append(n)
+            groups.setdefault((spec.stamp, spec.stamp_topic, own), []).append(n)
         return groups
+
+    def _note_stamps(self, frame: Frame) -> None:
+        """Keep the stamps a frame of a stamp topic lends (per system)."""
+        sysid = frame.data.get("sysid")
+        for field in self.stamp_topics[frame.topic]:
+            raw = lookup(frame.data, field)
+            if not isinstance(raw, bool) and isinstance(raw, (int, float)):
+                self._borrowed[(frame.topic, field, sysid)] = (raw, frame.receive_ns)
+
+    def _borrow(self, frame: Frame, stamp_topic: str, field: str):
+        """The stamp a frame without one takes: the latest of ``stamp_topic`` from its system, if recent."""
+        got = self._borrowed.get((stamp_topic, field, frame.data.get("sysid")))
+        if got is None or frame.receive_ns - got[1] > BORROW_WITHIN_S * 1e9 or frame.receive_ns < got[1]:
+            return None
+        return got[0]
 
     def push(self, frame: Frame) -> None:
         """Take the samples a frame carries (frames of other topics are ignored)."""
+        if not isinstance(frame.data, dict):
+            return
+        if frame.topic in self.stamp_topics:
+            self._note_stamps(frame)
         names = self.by_topic.get(frame.topic)
-        if not names or not isinstance(frame.data, dict):
+        if not names:
             return
         by_stamp = self._taking(names, frame)
         if not by_stamp:
             return
         self.counts["frames_used"] += 1
-        for (stamp, own), group in by_stamp.items():
+        for (stamp, stamp_topic, own), group in by_stamp.items():
             values = self._values(group, frame)
             if stamp is None:
                 released = [(frame.receive_ns * 1e-9, values)]
             else:
-                raw = lookup(frame.data, stamp)              # a dotted path too, as offline
+                # a dotted path too, as offline; borrowed from another topic's latest frame when so mapped
+                raw = lookup(frame.data, stamp) if stamp_topic is None else self._borrow(frame, stamp_topic, stamp)
                 if isinstance(raw, bool) or not isinstance(raw, (int, float)):
                     self.counts["missing_field"] += 1
                     for n, _ in values:
                         self.signal_counts[n]["missing_field"] += 1
                     continue
-                clock_key = None if own is None else (frame.topic, stamp, *own)
-                clock = self._clock(frame, stamp, self.specs[group[0]].stamp_scale, clock_key)
+                clock_key = None if own is None else (frame.topic, stamp, *(() if stamp_topic is None else (stamp_topic,)),
+                                                      *own)
+                clock = self._clock(frame, stamp, self.specs[group[0]].stamp_scale, clock_key, stamp_topic)
                 before = (clock.wraps, clock.resets, clock.rejected)
                 released = clock.feed(raw, frame.receive_ns * 1e-9, values)
                 for key, b, a in zip(("wraps", "resets", "clock_rejected"), before,

@@ -266,7 +266,7 @@ class SignalExtractor:
         fields equals its value.
     read_fields : tuple of str
         Every field a message must carry for this signal: operands, the stamp field (when the
-        signal has one) and the selection fields, without repeats.
+        signal has one on its own topic) and the selection fields, without repeats.
     follows_vehicle_lock : bool
         False when the signal names its own ``sysid`` or ``compid`` (it then overrides the
         aligner's lock on the first vehicle seen, for its own frames).
@@ -286,7 +286,8 @@ class SignalExtractor:
         conds.extend(tuple(getattr(spec, "where", ()) or ()))
         self.conditions = tuple(conds)
         fields = list(self.expression.operands)
-        for f in ([spec.stamp] if spec.stamp else []) + [k for k, _ in self.conditions]:
+        own_stamp = spec.stamp if spec.stamp and not getattr(spec, "stamp_topic", None) else None
+        for f in ([own_stamp] if own_stamp else []) + [k for k, _ in self.conditions]:
             if f not in fields:
                 fields.append(f)
         self.read_fields = tuple(fields)
@@ -464,7 +465,10 @@ def diagnose(signals: Mapping[str, SignalSpec], signal_counts: Mapping[str, Mapp
             out.append(f"signal {name}: {e}")
             continue
         missing = [f for f in ex.read_fields if not _has(sample, f)]
-        if missing:
+        stamp_topic = getattr(spec, "stamp_topic", None)
+        if stamp_topic and not topics_seen.get(stamp_topic, (0, ()))[0]:
+            out.append(f"signal {name}: timed by {stamp_topic}.{spec.stamp}, and no frames on {stamp_topic} yet")
+        elif missing:
             what = "field" if len(missing) == 1 else "fields"
             out.append(f"signal {name}: {what} {', '.join(repr(f) for f in missing)} missing from {topic} "
                        f"(fields there: {_list(_fields_of(sample), 24)})")

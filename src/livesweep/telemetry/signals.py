@@ -77,6 +77,12 @@ def _read_topics(log: Path, groups: Mapping[str, list[SignalExtractor]],
         fields = requests.setdefault(topic, [])
         for ex in extractors:
             fields.extend(f for f in ex.read_fields if f not in fields)
+    for extractors in groups.values():               # topics that lend their stamp (``stamp_topic``)
+        for ex in extractors:
+            if ex.spec.stamp_topic:
+                fields = requests.setdefault(ex.spec.stamp_topic, [])
+                if ex.spec.stamp not in fields:
+                    fields.append(ex.spec.stamp)
     try:
         got = cached_columns(log, requests, lambda n: read_topics_fields(log, requests, time="log", notes=n),
                              time="log", missing="error")
@@ -88,9 +94,22 @@ def _read_topics(log: Path, groups: Mapping[str, list[SignalExtractor]],
     return got["columns"]
 
 
-def _stamp_seconds(spec: SignalSpec, cols: Mapping[str, np.ndarray]) -> np.ndarray:
+def _stamp_seconds(spec: SignalSpec, cols: Mapping[str, np.ndarray],
+                   all_cols: Mapping[str, Mapping[str, np.ndarray]] | None = None) -> np.ndarray:
     if spec.stamp is None:
         return cols["t_ns"].astype(np.float64) / 1e9
+    if spec.stamp_topic:
+        # the stamp of the latest frame of the lending topic received before each message, as live
+        # (:data:`livesweep.telemetry.align.BORROW_WITHIN_S`); NaN where there is none
+        from livesweep.telemetry.align import BORROW_WITHIN_S
+
+        lend = (all_cols or {})[spec.stamp_topic]
+        lt = lend["t_ns"]
+        order = np.argsort(lt, kind="stable")
+        lt, stamps = lt[order], np.asarray(lend[spec.stamp], float)[order] * spec.stamp_scale
+        k = np.searchsorted(lt, cols["t_ns"], side="right") - 1
+        ok = (k >= 0) & (cols["t_ns"] - lt[np.clip(k, 0, None)] <= BORROW_WITHIN_S * 1e9)
+        return np.where(ok, stamps[np.clip(k, 0, None)] if stamps.size else np.nan, np.nan)
     return cols[spec.stamp] * spec.stamp_scale
 
 
@@ -111,10 +130,11 @@ def _range_text(record: RecordSpec) -> str:
     return f"[{lo}, {hi})"
 
 
-def _make_signal(log: Path, record: RecordSpec, ex: SignalExtractor, cols: Mapping[str, np.ndarray]) -> RawSignal:
+def _make_signal(log: Path, record: RecordSpec, ex: SignalExtractor, cols: Mapping[str, np.ndarray],
+                 all_cols: Mapping[str, Mapping[str, np.ndarray]] | None = None) -> RawSignal:
     spec = ex.spec
     where = f"{log}: signal {spec.name!r} (topic {spec.topic!r}, field {spec.field!r})"
-    t = _stamp_seconds(spec, cols)
+    t = _stamp_seconds(spec, cols, all_cols)
     if t.size == 0:
         raise LogFormatError(f"{where}: the topic has no messages")
     raw = ex.values(cols)
@@ -201,5 +221,5 @@ def read_signals(record: RecordSpec, signals: Mapping[str, SignalSpec], names: I
     for topic, exs in groups.items():
         cols = all_cols[topic]
         for ex in exs:
-            out[ex.spec.name] = _make_signal(log, record, ex, cols)
+            out[ex.spec.name] = _make_signal(log, record, ex, cols, all_cols)
     return {n: out[n] for n in names}

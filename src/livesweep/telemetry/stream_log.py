@@ -36,6 +36,9 @@ ArduPilot DataFlash log (``.bin``, ArduCopter)
     SERVO_OUTPUT_RAW      RCOU Cn -> servon_raw (port 0)             RC_CHANNELS (``SRx_RC_CHAN``)
     RAW_IMU               IMU instance 0: mg, mrad/s, cdegC, no mag  RAW_SENSORS (``SRx_RAW_SENS``)
     SCALED_IMU2, _IMU3    IMU instances 1 and 2, same units          RAW_SENSORS
+    PARAM_VALUE           PARM: every parameter's value at the       none: a ground station's fetch
+                          slice start (index 0..n-1 of n), then      when it connects, and the echo
+                          each change when it is logged              of a parameter set
     ====================  =========================================  ==================================
 
     Time fields come from TimeUS: ``time_boot_ms = TimeUS // 1000``, ``time_usec = TimeUS``
@@ -44,7 +47,7 @@ ArduPilot DataFlash log (``.bin``, ArduCopter)
     ATTITUDE and each PID_TUNING axis, 10 Hz SERVO_OUTPUT_RAW, 50 Hz RAW_IMU), or at most
     ``rate_hz`` of them per log second per message (and PID axis, IMU instance), the first in
     each ``1/rate_hz`` interval: what a telemetry stream rate (``SRx_EXTRA1 = 50``) gives. A
-    radio link carries far less than 400 Hz; HEARTBEAT and STATUSTEXT are never thinned.
+    radio link carries far less than 400 Hz; HEARTBEAT, STATUSTEXT and PARAM_VALUE are never thinned.
 
     As ArduCopter builds them: ``base_mode`` = CUSTOM_MODE_ENABLED | STABILIZE_ENABLED |
     MANUAL_INPUT_ENABLED, plus SAFETY_ARMED while armed (GUIDED_ENABLED, which ArduCopter sets
@@ -99,7 +102,9 @@ _PID_AXES = {"PIDR": 1, "PIDP": 2, "PIDY": 3, "PIDA": 4}     # PID_TUNING_ROLL .
 _IMU_MESSAGES = {0: "RAW_IMU", 1: "SCALED_IMU2", 2: "SCALED_IMU3"}
 _GRAVITY_MSS = 9.80665
 # FMT too: the first FMT record carries the log's first time stamp (records without one take it)
-_DATAFLASH_TYPES = frozenset({"FMT", "MODE", "MSG", "EV", "ATT", "RATE", "RCOU", "IMU", *_PID_AXES})
+_DATAFLASH_TYPES = frozenset({"FMT", "MODE", "MSG", "EV", "ATT", "RATE", "RCOU", "IMU", "PARM", *_PID_AXES})
+_MAV_PARAM_TYPE_REAL32 = 9
+_UNTHINNED = ("HEARTBEAT", "STATUSTEXT", "PARAM_VALUE")
 
 
 def sniff_log(path) -> str:
@@ -365,6 +370,11 @@ def _pid_tuning(axis: int, v: Mapping[str, Any]) -> dict:
             "I": g("I", 0.0), "D": g("D", 0.0), "SRate": g("SRate", 0.0), "PDmod": g("Dmod", 0.0)}
 
 
+def _param_value(name: str, value: float, index: int, count: int) -> dict:
+    return {"param_id": name[:16], "param_value": float(value), "param_type": _MAV_PARAM_TYPE_REAL32,
+            "param_count": count, "param_index": index}
+
+
 def _imu(msgname: str, t_us: int, v: Mapping[str, Any]) -> dict:
     rec: dict[str, Any] = {"time_usec": t_us} if msgname == "RAW_IMU" else {"time_boot_ms": t_us // 1000}
     for ax in "xyz":
@@ -419,6 +429,8 @@ def dataflash_messages(path, *, start_s: float = 0.0, end_s: float | None = None
     def timeline() -> Iterator[tuple[int, str, dict]]:
         """(TimeUS, msgname, record) in log order, heartbeats every second from the slice start."""
         vehicle = _Vehicle()
+        params: dict[str, float] = {}              # PARM: every parameter's latest value
+        dumped = False                             # the values at the slice start were sent
         att: tuple[int, dict] | None = None        # the ATT record waiting for its RATE
         rate_rec: tuple[int, dict] | None = None   # the latest RATE
         next_hb: int | None = None                 # TimeUS of the next heartbeat
@@ -426,8 +438,12 @@ def dataflash_messages(path, *, start_s: float = 0.0, end_s: float | None = None
             out._note(t_us)
             if next_hb is None:
                 next_hb = out.slice_start_us
+            if name == "PARM" and not (isinstance(v.get("Name"), str) and isinstance(v.get("Value"), (int, float))):
+                continue
             if t_us < out.slice_start_us:           # before the slice: only the state carries over
-                if name == "RATE":
+                if name == "PARM":
+                    params[v["Name"]] = float(v["Value"])
+                elif name == "RATE":
                     rate_rec = (t_us, v)
                 elif name in ("MODE", "EV", "MSG"):
                     vehicle.note(name, v)
@@ -438,7 +454,15 @@ def dataflash_messages(path, *, start_s: float = 0.0, end_s: float | None = None
             while next_hb < t_us:
                 yield next_hb, "HEARTBEAT", vehicle.heartbeat()
                 next_hb += 1_000_000
-            if name == "ATT":
+            if not dumped:                          # a ground station fetches every parameter as it connects
+                dumped = True
+                for k, (pname, pvalue) in enumerate(params.items()):
+                    yield t_us, "PARAM_VALUE", _param_value(pname, pvalue, k, len(params))
+            if name == "PARM":                       # a parameter set during the slice: the vehicle echoes it
+                params[v["Name"]] = float(v["Value"])
+                yield t_us, "PARAM_VALUE", _param_value(v["Name"], v["Value"], list(params).index(v["Name"]),
+                                                        len(params))
+            elif name == "ATT":
                 if rate_rec is not None and rate_rec[0] == t_us:
                     yield t_us, "ATTITUDE", _attitude(t_us, v, rate_rec[1])
                 else:
@@ -477,7 +501,7 @@ def dataflash_messages(path, *, start_s: float = 0.0, end_s: float | None = None
                 continue
             if where > 0:
                 return
-            if rate is not None and name not in ("HEARTBEAT", "STATUSTEXT"):
+            if rate is not None and name not in _UNTHINNED:
                 key = (name, rec.get("axis"))
                 k = (t_us - out.slice_start_us) * rate // 1_000_000
                 if last_bin.get(key) == k:
