@@ -124,3 +124,27 @@ def simulated_record(result, rate_hz: float = 50.0, *, references: bool = False,
     rows = [s.values[::int(round(s.rate_hz / rate_hz))] for _, s in sources]
     n = min(r.size for r in rows)
     return np.array([r[:n] for r in rows]), [name for name, _ in sources]
+
+
+class CpuHog:
+    """Processes that keep every core busy (a field laptop running a ground station and video): the
+    live tests run beside them. A context manager; ``n`` defaults to the number of cores."""
+
+    def __init__(self, n: int | None = None):
+        import os
+
+        self.n = n if n is not None else (os.cpu_count() or 2)
+        self.procs: list = []
+
+    def __enter__(self) -> "CpuHog":
+        import subprocess
+        import sys
+
+        self.procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(self.n)]
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for p in self.procs:
+            p.kill()
+        for p in self.procs:
+            p.wait()

@@ -2,6 +2,7 @@
 replay of its own recording, Zenoh into the monitor, a third-party tlog, a killed recorder."""
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -222,14 +223,17 @@ def test_third_party_tlog_runs_through_the_monitor_without_a_crash():
     assert counts["bad_crc"] + counts["bad_prefix_or_garbage"] > 0       # the awkward log has BAD_DATA
 
 
-def test_a_killed_monitor_leaves_a_readable_recording(tmp_path):
-    """SIGKILL mid-recording loses at most the last flush interval (1 s) of messages."""
-    out = tmp_path / "killed.mcap"
-    mon = subprocess.Popen([sys.executable, "-m", "livesweep", "monitor", "--mavlink", "udpin:127.0.0.1:14761",
-                            "--record", str(out), "--window", "30"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+def _stream_then_kill(out: Path, port: int, victim: str) -> tuple[int, subprocess.Popen]:
+    """Stream the simulator's records at 4x real time for 3 s into a monitor recording ``out``, then
+    SIGKILL ``victim``: the monitor process or its recorder process. Returns the frames sent."""
+    mon = subprocess.Popen([sys.executable, "-m", "livesweep", "monitor", "--mavlink", f"udpin:127.0.0.1:{port}",
+                            "--record", str(out), "--window", "30", "--no-status", "--no-markers"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
         assert mon.stdout.readline().startswith(b"monitor: listening")  # the socket is bound
-        tx = MavlinkSender("udpout:127.0.0.1:14761")
+        children = Path(f"/proc/{mon.pid}/task/{mon.pid}/children").read_text().split()
+        (recorder,) = [int(c) for c in children]
+        tx = MavlinkSender(f"udpout:127.0.0.1:{port}")
         items = sim_records(seed=7, duration_s=30.0)
         t_first = items[0][0]
         sent = 0
@@ -243,16 +247,43 @@ def test_a_killed_monitor_leaves_a_readable_recording(tmp_path):
                 break
         tx.close()
         time.sleep(0.3)
-        mon.send_signal(signal.SIGKILL)
-        mon.wait(10)
+        os.kill(mon.pid if victim == "monitor" else recorder, signal.SIGKILL)
+        mon.wait(30)
+        if victim == "monitor":                  # the recorder finishes the file on its own
+            deadline = time.monotonic() + 30
+            while Path(f"/proc/{recorder}").exists() and time.monotonic() < deadline:
+                time.sleep(0.1)
     finally:
         if mon.poll() is None:
             mon.kill()
+    return sent, mon
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="finds the recorder process in /proc")
+def test_a_killed_monitor_leaves_a_finished_recording_with_every_frame(tmp_path):
+    """SIGKILL of the monitor: its recorder process sees the monitor gone, reads what the socket
+    still holds and finishes the file, with every frame sent."""
+    out = tmp_path / "killed.mcap"
+    sent, _ = _stream_then_kill(out, 14761, "monitor")
+    s = read_summary(out)
+    assert s.complete
+    assert sum(v for k, v in s.message_counts.items() if k.startswith("/mavlink/")) == sent
+    assert s.message_counts["/link/mavlink"] == sent                     # one frame per datagram here
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="finds the recorder process in /proc")
+def test_a_killed_recorder_loses_at_most_a_second_and_the_monitor_says_so(tmp_path):
+    """SIGKILL of the recorder process: the file is left unfinished, readable, with at most the
+    last flush interval (1 s) of messages missing; the monitor stops with one line saying why."""
+    out = tmp_path / "killed.mcap"
+    sent, mon = _stream_then_kill(out, 14762, "recorder")
     s = read_summary(out)
     assert not s.complete
-    got = sum(v for k, v in s.message_counts.items() if k.startswith("/mavlink/"))
+    got = s.message_counts.get("/link/mavlink", 0)
     rate = sent / 3.0
     assert sent - 1.5 * rate <= got <= sent
+    err = mon.stderr.read().decode()
+    assert mon.returncode != 0 and "recorder process" in err and "Traceback" not in err, err
 
 
 VERDICT_KILL_CHILD = """

@@ -458,7 +458,6 @@ def _stop_on_signals(pipe) -> None:
 def cmd_monitor(args) -> int:
     """Live monitor: MAVLink and/or Zenoh in, estimates to Rerun/Zenoh, everything to MCAP."""
     from livesweep.monitor.pipeline import MonitorPipeline
-    from livesweep.telemetry.recorder import McapRecorder
 
     if not args.mavlink and not args.zenoh:
         raise ConfigError("give --mavlink URL (e.g. udpin:127.0.0.1:14550) and/or --zenoh KEYEXPR")
@@ -471,12 +470,15 @@ def cmd_monitor(args) -> int:
             raise ConfigError(f"--record {args.record!r} exists: a recording is never overwritten; choose another "
                               "name or pass --force")
     key = _read_signing_key(args.signing_key_file)
-    sources, publisher, view = [], None, None
+    from livesweep.telemetry.capture import LiveCapture
+    from livesweep.telemetry.mavlink_in import MavlinkSource, parse_source_url
+
+    udp = [u for u in args.mavlink or [] if parse_source_url(u)["kind"] == "udpin"]
+    sources, publisher, view, capture = [], None, None, None
     try:                 # everything that can fail first: the recording (which --force truncates) last
         for url in args.mavlink or []:
-            from livesweep.telemetry.mavlink_in import MavlinkSource
-
-            sources.append(MavlinkSource(url, signing_key=key))
+            if url not in udp:
+                sources.append(MavlinkSource(url, signing_key=key))
         if args.zenoh:
             from livesweep.telemetry.zenoh_io import ZenohPublisher, ZenohSource, zenoh_config
 
@@ -485,14 +487,19 @@ def cmd_monitor(args) -> int:
             if args.zenoh_publish:
                 publisher = ZenohPublisher(config=cfg, connect_port=args.zenoh_listen)
         view = _view(args, settings, "live")
-        recorder = McapRecorder(args.record, settings=settings.to_dict(), overwrite=args.force,
-                                metadata={"test_point": {"source": "livesweep monitor"}}) if args.record else None
+        # the UDP links and the recording in a process of their own: a busy analysis cannot starve them
+        capture = LiveCapture(udp, record_path=args.record, overwrite=args.force, settings=settings.to_dict(),
+                              metadata={"test_point": {"source": "livesweep monitor"}}, signing_key=key) \
+            if udp or args.record else None
+        if capture is not None and udp:
+            sources.insert(0, capture.source)
+        recorder = capture.recorder if args.record else None
         if recorder is not None:
             from livesweep.monitor.foxglove import write_layout
 
             layout = write_layout(args.record, settings.signals, settings.inputs, settings.outputs)
     except BaseException:
-        for part in (*sources, publisher, view):
+        for part in (*sources, publisher, view, capture):
             if part is not None:
                 part.close()
         raise
@@ -515,7 +522,11 @@ def cmd_monitor(args) -> int:
         from livesweep.monitor.markers import HELP
 
         print(f"monitor: {HELP}", flush=True)
-    summary = pipe.run(duration_s=args.duration)
+    try:
+        summary = pipe.run(duration_s=args.duration)
+    finally:
+        if capture is not None:
+            capture.close()
     if status is not None:
         status.close()
     _print_monitor_summary(summary)

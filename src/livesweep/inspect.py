@@ -1,11 +1,21 @@
-"""``livesweep inspect LOG``: what a log holds, and a channel map that fits it.
+"""``livesweep inspect LOG``: what a log holds, the channel maps that fit it, its SystemID test points.
 
-Any log livesweep reads: MCAP directly; a MAVLink ``.tlog``, DataFlash ``.bin``, PX4 ``.px4log``
-or ULog is converted to a temporary MCAP first (tables need ``--columns``, as for ``convert``).
-For every topic: messages, rate, time span and numeric fields with their units (MAVLink's
-message definitions, DataFlash FMTU, a column map's units). Then the shipped channel-map
-presets whose signals the log holds, best first (the one whose inputs and outputs all have data),
-and, for logs from ArduPilot's SystemID mode, the test points its SIDS records mark.
+Any log livesweep reads, in one pass over its messages: a MAVLink ``.tlog`` frame by frame (no
+conversion), MCAP directly; a DataFlash ``.bin``, PX4 ``.px4log``, ULog or table is converted to a
+temporary MCAP first (tables need ``--columns``, as for ``convert``). For every topic: messages,
+rate, time span and numeric fields with their units (MAVLink's message definitions, DataFlash
+FMTU, a column map's units). Then:
+
+* **the shipped channel-map presets that fit**, best first: every signal's messages are there and
+  vary, the vehicle is the one the map is made for (its ``[map.vehicle]`` against the log's
+  parameters, "Frame:" text and HEARTBEAT type), and every signal arrives fast enough for the band
+  it must show (2.5 x its top frequency: the band a SystemID run was told to sweep, else the
+  map's). A preset that almost fits is listed with why it does not;
+* for an ArduCopter DataFlash log, the presets for its telemetry as ``livesweep stream`` sends it
+  (the live path), at the stream rate suggested;
+* **the ArduPilot SystemID test points**: each start ("SystemID Starting: axis=N" in STATUSTEXT or
+  MSG, SIDS) with its axis, band and magnitude (from SIDS or the ``SID_*`` parameters), its end
+  ("SystemID Finished", or the mode leaving SYSTEMID), and whether the log holds telemetry during it.
 
 This is an edge module (files); it only reads.
 """
@@ -14,18 +24,35 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from livesweep.errors import ConfigError, LivesweepError
+from livesweep.errors import ConfigError
 
-__all__ = ["TopicInfo", "LogInspection", "inspect_log", "format_inspection"]
+__all__ = ["TopicInfo", "MapFit", "SystemIdRun", "LogInspection", "inspect_log", "format_inspection",
+           "STREAM_RATE_HZ"]
 
 #: Fields listed per topic at most (a DataFlash PARM or a ULog topic can have hundreds).
 MAX_FIELDS = 40
 #: A log shorter than this [s] is said to be too short for a frequency response.
 SHORT_S = 10.0
+#: A signal must arrive at this many times the top frequency it must show (the judged band ends at
+#: 0.8 of the grid's Nyquist frequency, and a signal sampled slower aliases what lies above).
+RATE_PER_TOP_FREQUENCY = 2.5
+#: The stream rate suggested for a DataFlash log's telemetry (``livesweep stream --rate-hz``; a
+#: telemetry stream rate such as SRx_EXTRA1 = 50) [Hz].
+STREAM_RATE_HZ = 50.0
+#: What ``livesweep stream`` makes of a DataFlash log: MAVLink topic -> the DataFlash records it comes
+#: from (its rate is the slowest of them, capped at the stream rate); PID_TUNING per axis.
+_STREAM_OF_DATAFLASH = {"/mavlink/ATTITUDE": ("/dataflash/ATT", "/dataflash/RATE"),
+                        "/mavlink/SERVO_OUTPUT_RAW": ("/dataflash/RCOU",),
+                        "/mavlink/RAW_IMU": ("/dataflash/IMU",), "/mavlink/HEARTBEAT": (),
+                        "/mavlink/STATUSTEXT": ("/dataflash/MSG",), "/mavlink/PARAM_VALUE": ("/dataflash/PARM",)}
+_PID_RECORDS = {1: "/dataflash/PIDR", 2: "/dataflash/PIDP", 3: "/dataflash/PIDY"}
+_START = re.compile(r"SystemID Starting: axis=(\d+)")
+_FINISHED = re.compile(r"SystemID Finished")
 
 
 @dataclass(frozen=True)
@@ -54,6 +81,54 @@ class TopicInfo:
 
 
 @dataclass(frozen=True)
+class MapFit:
+    """How a preset fits the log.
+
+    Attributes
+    ----------
+    name : str
+    pairs, total : int
+        (output, input) pairs whose signals the log holds and vary, of all the map's pairs.
+    why : str
+        Why it does not fit ("" when it does): another vehicle, signals too slow for the band.
+    live : bool
+        A preset for the log's telemetry as ``livesweep stream`` sends it (a DataFlash log).
+    """
+
+    name: str
+    pairs: int
+    total: int
+    why: str = ""
+    live: bool = False
+
+    @property
+    def fits(self) -> bool:
+        return not self.why
+
+
+@dataclass(frozen=True)
+class SystemIdRun:
+    """One ArduPilot SystemID run in the log.
+
+    Attributes
+    ----------
+    start_s, end_s : float
+        Relative to the log's first message [s]; ``end_s`` NaN when the log does not say.
+    axis : int or None
+    what : str
+        Axis, band and magnitude in words.
+    data : bool
+        The log holds telemetry during it (a log filtered around one run lists the others' texts only).
+    """
+
+    start_s: float
+    end_s: float
+    axis: int | None
+    what: str
+    data: bool = True
+
+
+@dataclass(frozen=True)
 class LogInspection:
     """What :func:`inspect_log` found.
 
@@ -66,10 +141,16 @@ class LogInspection:
     duration_s : float
     topics : tuple of TopicInfo
     maps : tuple of (str, int, int)
-        Presets whose signals the log holds: ``(name, pairs with data, pairs)``, best first.
+        Presets that fit: ``(name, pairs with data, pairs)``, best first.
     test_points : tuple of (float, float, str)
-        ``(start_s, end_s, what)`` from ArduPilot SystemID records, relative to the first message.
+        ``(start_s, end_s, what)`` of the SystemID runs, relative to the first message.
     notes : tuple of str
+    fits : tuple of MapFit
+        Every preset that holds signals of the log, fitting or not (with why).
+    live_maps : tuple of str
+        For a DataFlash log: the presets for its telemetry as ``livesweep stream --rate-hz``
+        :data:`STREAM_RATE_HZ` sends it, best first.
+    systemid : tuple of SystemIdRun
     """
 
     path: Path
@@ -79,6 +160,9 @@ class LogInspection:
     maps: tuple = ()
     test_points: tuple = ()
     notes: tuple = field(default_factory=tuple)
+    fits: tuple = ()
+    live_maps: tuple = ()
+    systemid: tuple = ()
 
 
 def _numeric_fields(obj, prefix=""):
@@ -127,122 +211,233 @@ def _mavlink_units(topic: str) -> dict:
 
 
 def _candidate_maps():
-    """``(name, ChannelMap)`` of the shipped presets and the packaged XV-15 map (the demo's)."""
+    """``(name, ChannelMap, whole)`` of the shipped presets and the packaged XV-15 map (the demo's,
+    which counts only when all of it fits)."""
     from livesweep.config import read_channel_map
     from livesweep.maps import list_maps, load_map
 
     out = [(info.name, load_map(info.name), False) for info in list_maps()]
     xv15 = Path(__file__).resolve().parent / "data" / "xv15_channels.toml"
-    out.append((str(xv15), read_channel_map(xv15, one_clock=False), True))      # only when all of it fits
+    out.append((str(xv15), read_channel_map(xv15, one_clock=False), True))
     return out
 
 
-#: ArduCopter presets and the FRAME_CLASS / FRAME_TYPE parameters they are for (AP_Motors: class 1
-#: quad, 2 hexa; type 0 plus, 1 X), and the MAVLink HEARTBEAT types (MAV_TYPE) each preset flies.
-_FRAMES = {"ardupilot-copter-quad-plus": (1, 0), "ardupilot-copter-quad-x": (1, 1), "ardupilot-copter-hexa-x": (2, 1)}
-_MAV_TYPES = {"ardupilot-copter-quad-plus": {2}, "ardupilot-copter-quad-x": {2}, "ardupilot-copter-hexa-x": {13},
-              "ardupilot-plane": {1}}
+class _Stats:
+    """Per-topic and per-signal statistics gathered in one pass over a log's frames."""
+
+    def __init__(self, maps):
+        from livesweep.monitor.vehicle import VehicleInfo
+        from livesweep.telemetry.extract import compile_signal
+
+        self.topics: dict[str, list] = {}            # topic -> [n, first ns, last ns, first data]
+        self._vehicles: dict = {}                    # sysid -> VehicleInfo: the log's main system is judged
+        self._frames_by_system: dict = {}            # sysid -> frames (the main system sends the most)
+        self._new_vehicle = VehicleInfo
+        self.runs: list[dict] = []                   # SystemID runs: start ns, end ns, axis, sids, params
+        self.t0: int | None = None
+        self.t_end: int | None = None
+        self.signals: dict[str, list] = {}           # key -> [extractor, n, min, max, first ns, last ns]
+        self.by_topic: dict[str, list[str]] = {}
+        for name, m, _ in maps:
+            for sig, spec in m.signals.items():
+                key = f"{spec.topic}|{spec.field}|{spec.where}|{spec.sysid}|{spec.compid}"
+                if key not in self.signals:
+                    self.signals[key] = [compile_signal(spec), 0, math.inf, -math.inf, None, None]
+                    self.by_topic.setdefault(spec.topic, []).append(key)
+
+    def take(self, topic: str, t_ns: int, data) -> None:
+        if self.t0 is None:
+            self.t0 = t_ns
+        self.t_end = t_ns if self.t_end is None else max(self.t_end, t_ns)
+        st = self.topics.get(topic)
+        if st is None:
+            self.topics[topic] = [1, t_ns, t_ns, data]
+        else:
+            st[0] += 1
+            st[2] = t_ns
+        if not isinstance(data, dict):
+            return
+        sysid = data.get("sysid")
+        self._frames_by_system[sysid] = self._frames_by_system.get(sysid, 0) + 1
+        for key in self.by_topic.get(topic, ()):
+            s = self.signals[key]
+            v, problem = s[0].value(data)
+            if problem is None:
+                s[1] += 1
+                s[2] = min(s[2], v)
+                s[3] = max(s[3], v)
+                s[4] = t_ns if s[4] is None else s[4]
+                s[5] = t_ns
+        if topic in ("/mavlink/PARAM_VALUE", "/dataflash/PARM", "/dataflash/SIDS", "/mavlink/STATUSTEXT",
+                     "/dataflash/MSG", "/mavlink/HEARTBEAT", "/dataflash/MODE"):
+            self._systemid(topic, t_ns, data)
+
+    def _main(self):
+        """The system id that sent the most messages (a tlog may hold a ground station's too)."""
+        return max(self._frames_by_system, key=self._frames_by_system.get) if self._frames_by_system else None
+
+    @property
+    def vehicle(self):
+        """What the main system said of itself."""
+        return self._vehicles.get(self._main()) or self._new_vehicle()
+
+    def _systemid(self, topic: str, t_ns: int, d: dict) -> None:
+        sysid = d.get("sysid")
+        v = self._vehicles.get(sysid)
+        if v is None:
+            v = self._vehicles[sysid] = self._new_vehicle()
+        v.take(_Frame(topic, d))
+        if sysid is not None and sysid != self._main():
+            return                               # SystemID runs of the main system only
+        text = str(d.get("text", d.get("Message", ""))) if topic in ("/mavlink/STATUSTEXT", "/dataflash/MSG") else ""
+        last = self.runs[-1] if self.runs else None
+        if (m := _START.search(text)) or topic == "/dataflash/SIDS":
+            axis = int(m.group(1)) if m else d.get("Ax")
+            sids = d if topic == "/dataflash/SIDS" else None
+            if last is not None and last["end"] is None and abs(t_ns - last["start"]) < 2e9:
+                last["sids"] = last["sids"] or sids                  # the same start: MSG and SIDS
+                return
+            self.runs.append({"start": t_ns, "end": None, "axis": axis, "sids": sids,
+                              "injection": v.injection(axis, sids=sids)})
+        elif _FINISHED.search(text) and last is not None and last["end"] is None:
+            last["end"] = t_ns
+        if last is not None and last.get("sids") and (last.get("injection") is None
+                                                       or last["injection"].source != "SIDS"):
+            last["injection"] = v.injection(last["axis"], sids=last["sids"])
+
+    def signal(self, spec):
+        return self.signals[f"{spec.topic}|{spec.field}|{spec.where}|{spec.sysid}|{spec.compid}"]
 
 
-def _vehicle(mcap: Path, topics: dict) -> dict:
-    """What the log says about its airframe: ``FRAME_CLASS``, ``FRAME_TYPE`` (parameters) and the
-    HEARTBEAT ``type`` of the autopilot (MAVLink component 1), where present."""
-    from livesweep.telemetry.mcap_log import read_messages
-
-    found = {}
-    if "/mavlink/PARAM_VALUE" in topics:
-        for m in read_messages(mcap, ["/mavlink/PARAM_VALUE"]):
-            name = str(m.data.get("param_id", "")).strip("\x00 ")
-            if name in ("FRAME_CLASS", "FRAME_TYPE"):
-                found[name] = int(round(float(m.data.get("param_value", -1))))
-    if "/dataflash/PARM" in topics:
-        for m in read_messages(mcap, ["/dataflash/PARM"]):
-            name = str(m.data.get("Name", "")).strip()
-            if name in ("FRAME_CLASS", "FRAME_TYPE"):
-                found[name] = int(round(float(m.data.get("Value", -1))))
-    if "/mavlink/HEARTBEAT" in topics:
-        types = {}
-        for m in read_messages(mcap, ["/mavlink/HEARTBEAT"]):
-            if m.data.get("autopilot") not in (None, 8):          # 8: MAV_AUTOPILOT_INVALID (a GCS)
-                types[m.data.get("type")] = types.get(m.data.get("type"), 0) + 1
-        if types:
-            found["MAV_TYPE"] = max(types, key=types.get)
-    return found
+@dataclass(frozen=True)
+class _Frame:
+    topic: str
+    data: dict
 
 
-def _contradicted(name: str, vehicle: dict) -> bool:
-    if name in _FRAMES and "FRAME_CLASS" in vehicle:
-        cls, typ = _FRAMES[name]
-        if vehicle["FRAME_CLASS"] != cls or vehicle.get("FRAME_TYPE", typ) != typ:
-            return True
-    if name in _MAV_TYPES and "MAV_TYPE" in vehicle and vehicle["MAV_TYPE"] not in _MAV_TYPES[name]:
-        return True
-    return False
+def _frames(path: Path, fmt: str, tmp: Path, columns, notes: list):
+    """(topic, receive ns, data) of every message, in file order."""
+    if fmt == "tlog":
+        from livesweep.telemetry.mavlink_in import TlogSource
+
+        src = TlogSource(path)
+        try:
+            while not src.finished:
+                for f in src.poll(max_frames=20_000):
+                    yield f.topic, f.receive_ns, f.data
+        finally:
+            c = src.counts
+            if c.get("bad_prefix_or_garbage") or c.get("bad_crc"):
+                notes.append(f"{c.get('bad_crc', 0)} frames with a bad CRC and {c.get('bad_prefix_or_garbage', 0)} "
+                             "runs of garbage skipped")
+            if c.get("clock_implausible") or c.get("clock_unrepresentable"):
+                notes.append(f"{c.get('clock_implausible', 0) + c.get('clock_unrepresentable', 0)} time stamps that do "
+                             "not follow their stream's clock (a monitor would record those frames with their receive "
+                             "time)")
+            src.close()
+        return
+    mcap = path
+    if fmt != "mcap":
+        from livesweep.convert import convert
+
+        options = {"column_map": columns} if columns else {}
+        try:
+            result = convert(path, tmp / "log.mcap", **options)
+        except ConfigError as exc:
+            if columns is None and "column" in str(exc).lower():
+                raise ConfigError(f"{path}: a {fmt} table: give its column map with --columns MAP.toml "
+                                  f"(as for livesweep convert): {exc}") from None
+            raise
+        mcap = tmp / "log.mcap"
+        notes.append(f"read as {fmt} and converted in memory ({result.messages_written} messages of "
+                     f"{result.messages_read} read)")
+    from livesweep.telemetry.mcap_log import SkippedMessages, iter_file_order
+
+    skipped = SkippedMessages()
+    for m in iter_file_order(mcap, skipped=skipped):
+        yield m.topic, m.log_time_ns, m.data
+    if skipped.total:
+        notes.append(f"{skipped.total} message(s) livesweep does not decode: "
+                     + ", ".join(f"{n} {why}" for why, n in sorted(skipped.counts.items())))
 
 
-def _map_fit(mcap: Path, topics: dict) -> list:
-    """Maps ranked by the (output, input) pairs whose signals the log holds and that vary (a
-    constant signal, e.g. the unused motors of a hexa mix on a quad, gives no response)."""
-    from livesweep.config import RecordSpec
-    from livesweep.telemetry.signals import read_signals
+def _rate(n: int, first, last) -> float:
+    span = (last - first) * 1e-9 if first is not None and last is not None else 0.0
+    return (n - 1) / span if n > 1 and span > 0 else 0.0
 
-    out = []
-    vehicle = _vehicle(mcap, topics)
-    for name, m, whole in _candidate_maps():
-        sp = m.spectral
-        if sp is None or _contradicted(name, vehicle):
+
+def _band_top_hz(stats: _Stats, m) -> tuple[float, str]:
+    """The top frequency a map's signals must show [Hz], and where it comes from."""
+    tops = [r["injection"].omega_stop_rad_s / (2 * math.pi) for r in stats.runs if r.get("injection") is not None]
+    if tops:
+        return max(tops), "the SystemID band"
+    return m.spectral.band_rad_s[1] / (2 * math.pi), "the map's band"
+
+
+def _fit(stats: _Stats, name: str, m, whole: bool, rates: dict | None = None, live: bool = False) -> MapFit | None:
+    """How map ``m`` fits: None when it holds no signal of the log; ``rates`` (signal -> Hz) replaces
+    the measured rates (a stream's)."""
+    from livesweep.maps import vehicle_fits
+
+    sp = m.spectral
+    if sp is None:
+        return None
+    have = {}
+    for sig in (*sp.inputs, *sp.outputs, *(sp.references or ())):
+        spec = m.signals[sig]
+        if rates is not None:
+            r = rates.get(sig)
+            have[sig] = None if r is None else (True, r)
             continue
-
-        def has(sig):
-            s = m.signals.get(sig)
-            return s is not None and s.topic in topics and all(op in topics[s.topic] for op in _field_operands(s.field))
-
-        def varies(sig):
-            try:
-                read_signals(RecordSpec(log=mcap, label="", start_s=None, end_s=None), m.signals, [sig])
-            except LivesweepError:
-                return False
-            return True
-
-        if not all(has(r) for r in sp.references or ()):
-            continue
-        ins = [i for i in sp.inputs if has(i)]
-        outs = [o for o in sp.outputs if has(o)]
-        if not ins or not outs:
-            continue
-        ins, outs = [i for i in ins if varies(i)], [o for o in outs if varies(o)]
-        n, total = len(ins) * len(outs), len(sp.inputs) * len(sp.outputs)
-        if n and (n == total or not whole):
-            out.append((name, n, total))
-    out.sort(key=lambda x: (-x[1] / x[2], -x[1], x[0]))
-    return out
-
-
-def _field_operands(text: str) -> list:
-    """The field paths an expression reads (``servo2_raw - servo1_raw`` -> both)."""
-    from livesweep.telemetry.extract import parse_field
-
-    try:
-        expr = parse_field(text, "inspect")
-    except ConfigError:
-        return [text]
-    return list(expr.operands)
+        s = stats.signal(spec)
+        have[sig] = None if s[1] == 0 else (s[3] > s[2], _rate(s[1], s[4], s[5]))
+    if not all(have[r] is not None and have[r][0] for r in sp.references or ()):
+        return None
+    ins = [i for i in sp.inputs if have[i] is not None and have[i][0]]
+    outs = [o for o in sp.outputs if have[o] is not None and have[o][0]]
+    n, total = len(ins) * len(outs), len(sp.inputs) * len(sp.outputs)
+    if not n or (whole and n != total):
+        return None
+    why = ""
+    vh = dict(stats.vehicle.parameters)
+    c, t = stats.vehicle.frame()
+    vh.update({k: v for k, v in (("FRAME_CLASS", c), ("FRAME_TYPE", t), ("MAV_TYPE", stats.vehicle.mav_type))
+               if v is not None})
+    if m.vehicle and not vehicle_fits(m.vehicle, vh):
+        why = stats.vehicle.contradiction(m.vehicle) or "another vehicle"
+    else:
+        top_hz, what = _band_top_hz(stats, m)
+        need = RATE_PER_TOP_FREQUENCY * top_hz
+        slow = sorted((have[s][1], s) for s in (*ins, *outs) if have[s][1] < need)
+        if slow:
+            rate, sig = slow[0]
+            spec = m.signals[sig]
+            why = (f"{sig} ({spec.topic.rsplit('/', 1)[-1]}) {'would go' if live else 'arrives'} at {rate:.3g} Hz: "
+                   f"{what} up to {top_hz:.3g} Hz needs {need:.3g} Hz")
+    return MapFit(name, n, total, why, live)
 
 
-def _sysid_test_points(mcap: Path, t0_ns: int, topics: dict) -> list:
-    """ArduPilot SystemID: each SIDS record starts a test point (axis, magnitude, band, duration)."""
-    from livesweep.telemetry.mcap_log import read_messages
+def _stream_rates(stats: _Stats, m, rate_hz: float) -> dict | None:
+    """The rate each signal of MAVLink map ``m`` would arrive at when ``livesweep stream --rate-hz``
+    sends this DataFlash log; None when the stream lacks one of the map's topics."""
+    def rec_rate(topic):
+        st = stats.topics.get(topic)
+        return 0.0 if st is None else _rate(st[0], st[1], st[2])
 
-    topic = "/dataflash/SIDS"
-    if topic not in topics:
-        return []
-    out = []
-    for m in read_messages(mcap, [topic]):
-        d = m.data
-        start = (m.log_time_ns - t0_ns) / 1e9
-        dur = float(d.get("TR", 0) or 0) + float(d.get("TC", 0) or 0) + float(d.get("TFO", 0) or 0)
-        what = (f"SystemID axis {d.get('Ax')}, magnitude {d.get('Mag')}, {d.get('FSt')}-{d.get('FSp')} Hz")
-        out.append((start, start + dur if dur else math.nan, what))
+    out = {}
+    for sig, spec in m.signals.items():
+        if spec.topic == "/mavlink/PID_TUNING":
+            axis = dict(spec.where).get("axis")
+            src = _PID_RECORDS.get(int(axis)) if axis is not None else None
+            r = rec_rate(src) if src else 0.0
+        elif spec.topic in _STREAM_OF_DATAFLASH:
+            srcs = _STREAM_OF_DATAFLASH[spec.topic]
+            r = min(rec_rate(x) for x in srcs) if srcs else 1.0
+        else:
+            return None
+        if r <= 0:
+            return None
+        out[sig] = min(r, rate_hz)
     return out
 
 
@@ -263,66 +458,85 @@ def inspect_log(path, *, columns=None) -> LogInspection:
         naming the file and what to give).
     """
     from livesweep.convert.common import sniff_format
-    from livesweep.telemetry.mcap_log import read_messages, read_summary
 
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"{path}: no such file")
     fmt = sniff_format(path)
-    notes = []
-    with tempfile.TemporaryDirectory(prefix="livesweep-inspect-") as tmp:
-        mcap = path
-        if fmt != "mcap":
-            from livesweep.convert import convert
+    notes: list[str] = []
+    maps = _candidate_maps()
+    stats = _Stats(maps)
+    import logging
 
-            options = {"column_map": columns} if columns else {}
-            try:
-                result = convert(path, Path(tmp) / "log.mcap", **options)
-            except ConfigError as exc:
-                if columns is None and "column" in str(exc).lower():
-                    raise ConfigError(f"{path}: a {fmt} table: give its column map with --columns MAP.toml "
-                                      f"(as for livesweep convert): {exc}") from None
-                raise
-            mcap = Path(tmp) / "log.mcap"
-            notes.append(f"read as {fmt} and converted in memory ({_counts(result)})")
-        s = read_summary(mcap)
-        if not s.complete:
-            notes.append(f"unfinished recording ({s.tail_error or 'no footer'}): `livesweep recover {path}` "
-                         "makes a finished copy")
-        units = _channel_units(mcap)
-        infos, fields_by_topic = [], {}
-        other = {}
-        for topic, n in sorted(s.message_counts.items()):
-            if n == 0:
+    quiet = logging.getLogger("livesweep.telemetry")       # a reader's per-frame warnings: counted in the notes
+    level = quiet.level
+    quiet.setLevel(logging.ERROR)
+    try:
+        with tempfile.TemporaryDirectory(prefix="livesweep-inspect-") as tmp:
+            for topic, t_ns, data in _frames(path, fmt, Path(tmp), columns, notes):
+                stats.take(topic, t_ns, data)
+            units = _channel_units(Path(tmp) / "log.mcap") if fmt not in ("mcap", "tlog") else \
+                _channel_units(path) if fmt == "mcap" else {}
+            if fmt == "mcap":
+                from livesweep.telemetry.mcap_log import read_summary
+
+                s = read_summary(path)
+                if not s.complete:
+                    notes.append(f"unfinished recording ({s.tail_error or 'no footer'}): `livesweep recover {path}` "
+                                 "makes a finished copy")
+                undecoded = {t: n for t, n in s.message_counts.items() if n and t not in stats.topics}
+                if undecoded:
+                    notes.append(f"{len(undecoded)} topic(s) not in JSON, which livesweep does not read: "
+                                 + ", ".join(f"{t} ({n} messages)" for t, n in sorted(undecoded.items())[:8])
+                                 + (" ..." if len(undecoded) > 8 else ""))
+    finally:
+        quiet.setLevel(level)
+    t0 = stats.t0 or 0
+    infos = []
+    for topic, (n, first, last, sample) in sorted(stats.topics.items()):
+        names = list(_numeric_fields(sample))[:MAX_FIELDS] if isinstance(sample, dict) else []
+        u = {**_mavlink_units(topic), **units.get(topic, {})}
+        infos.append(TopicInfo(topic, n, _rate(n, first, last), (first - t0) / 1e9, (last - t0) / 1e9,
+                               tuple((f, u.get(f, "")) for f in names)))
+    duration = ((stats.t_end or t0) - t0) / 1e9
+    fits = [f for name, m, whole in maps if (f := _fit(stats, name, m, whole)) is not None]
+    fits.sort(key=lambda f: (not f.fits, -f.pairs / f.total, -f.pairs, f.name))
+    live = []
+    if fmt == "dataflash":
+        for name, m, whole in maps:
+            if whole or not all(s.topic.startswith("/mavlink/") for s in m.signals.values()):
                 continue
-            first = last = None
-            sample = None
-            try:
-                for m in read_messages(mcap, [topic]):
-                    if first is None:
-                        first, sample = m.log_time_ns, m.data
-                    last = m.log_time_ns
-            except LivesweepError as exc:            # a channel livesweep does not decode (ROS 2 CDR, protobuf)
-                other[topic] = (n, str(exc).split(": ")[-1] if "encoding" not in str(exc) else
-                                str(exc)[str(exc).find("message encoding"):].split(";")[0])
-                continue
-            names = list(_numeric_fields(sample))[:MAX_FIELDS] if isinstance(sample, dict) else []
-            fields_by_topic[topic] = set(_numeric_fields(sample)) if isinstance(sample, dict) else set()
-            u = {**_mavlink_units(topic), **units.get(topic, {})}
-            span = (last - first) / 1e9
-            infos.append(TopicInfo(topic, n, (n - 1) / span if span > 0 else 0.0, (first - s.start_ns) / 1e9,
-                                   (last - s.start_ns) / 1e9, tuple((f, u.get(f, "")) for f in names)))
-        if other:
-            notes.append(f"{len(other)} topic(s) not in JSON, which livesweep does not read: "
-                         + ", ".join(f"{t} ({n} messages, {why})" for t, (n, why) in sorted(other.items())[:8])
-                         + (" ..." if len(other) > 8 else ""))
-        maps = _map_fit(mcap, fields_by_topic)
-        tps = _sysid_test_points(mcap, s.start_ns, fields_by_topic)
-    return LogInspection(path, fmt, s.duration_s, tuple(infos), tuple(maps), tuple(tps), tuple(notes))
+            rates = _stream_rates(stats, m, STREAM_RATE_HZ)
+            if rates is not None and (f := _fit(stats, name, m, whole, rates=rates, live=True)) is not None:
+                live.append(f)
+        live.sort(key=lambda f: (not f.fits, -f.pairs / f.total, f.name))
+    runs = _runs(stats, t0)
+    return LogInspection(path, fmt, duration, tuple(infos),
+                         maps=tuple((f.name, f.pairs, f.total) for f in fits if f.fits),
+                         test_points=tuple((r.start_s, r.end_s, r.what) for r in runs), notes=tuple(notes),
+                         fits=tuple(fits + live), live_maps=tuple(f.name for f in live if f.fits), systemid=tuple(runs))
 
 
-def _counts(result) -> str:
-    return f"{result.messages_written} messages of {result.messages_read} read"
+def _runs(stats: _Stats, t0: int) -> list[SystemIdRun]:
+    """The SystemID runs, each with whether telemetry covers it (the map topics with data then)."""
+    from livesweep.monitor.vehicle import axis_name
+
+    data_topics = {spec.topic for key in stats.signals for spec in (stats.signals[key][0].spec,)}
+    spans = [(st[1], st[2]) for topic, st in stats.topics.items() if topic in data_topics and st[0] > 1]
+    out = []
+    for r in stats.runs:
+        start = r["start"]
+        end = r["end"]
+        inj = r["injection"]
+        if end is None and inj is not None:
+            end = start + int(inj.duration_s * 1e9)
+        what = f"SystemID {axis_name(r['axis'])}"
+        if inj is not None:
+            what += f", magnitude {inj.magnitude:g}, {inj.describe()}"
+        has_data = any(a <= (end or start) and b >= start for a, b in spans)
+        out.append(SystemIdRun((start - t0) / 1e9, math.nan if end is None else (end - t0) / 1e9, r["axis"], what,
+                               has_data))
+    return out
 
 
 def format_inspection(ins: LogInspection) -> str:
@@ -333,21 +547,38 @@ def format_inspection(ins: LogInspection) -> str:
         lines.append(f"  {t.topic}: {t.messages} messages, {t.rate_hz:.1f} Hz, {t.start_s:.1f}-{t.end_s:.1f} s")
         if t.fields:
             lines.append("      " + ", ".join(f"{f} [{u}]" if u else f for f, u in t.fields))
-    if ins.test_points:
-        lines.append("test points:")
-        lines += [f"  {a:.1f}-{b:.1f} s: {what}" if math.isfinite(b) else f"  from {a:.1f} s: {what}"
-                  for a, b, what in ins.test_points]
-    if ins.maps and ins.duration_s < SHORT_S:
+    if ins.systemid:
+        lines.append("test points (ArduPilot SystemID):")
+        for r in ins.systemid:
+            span = f"{r.start_s:.1f}-{r.end_s:.1f} s" if math.isfinite(r.end_s) else f"from {r.start_s:.1f} s"
+            lines.append(f"  {span}: {r.what}" + ("" if r.data else " (no telemetry in the log during it)"))
+    fitting = [f for f in ins.fits if f.fits and not f.live]
+    if fitting and ins.duration_s < SHORT_S:
         lines.append(f"only {ins.duration_s:.1f} s of data: too short for a frequency response (a sweep's lowest "
                      "frequency needs windows of tens of seconds)")
-    if ins.maps:
-        best = ins.maps[0][0]
+    if fitting:
+        best = fitting[0].name
         lines.append("channel-map presets whose signals this log holds (pairs with data / pairs):")
-        lines += [f"  {name}: {n}/{total}" for name, n, total in ins.maps]
+        lines += [f"  {f.name}: {f.pairs}/{f.total}" for f in fitting]
         how = (f"livesweep replay {ins.path} --map {best}" if ins.format == "mcap" else
                f"livesweep convert {ins.path} --out LOG.mcap && livesweep replay LOG.mcap --map {best}")
         lines.append(f"suggested: {how}")
         lines.append(f"  a case for identify: livesweep new-case {ins.path} --map {best} --out CASE.toml")
+    elif not ins.topics:
+        lines.append("no topic livesweep decodes (it reads JSON MCAP channels; ROS 2 CDR needs converting to JSON "
+                     "first): no channel map can be suggested")
     else:
-        lines.append("no shipped channel map fits this log: write one ([signals], [spectral]) from the fields above")
+        lines.append("no shipped channel map fits this log: write one ([signals], [spectral]) from the fields above "
+                     "(docs/case-file.md, Channel maps)")
+    unfit = [f for f in ins.fits if not f.fits and not f.live]
+    if unfit:
+        lines.append("presets that hold this log's signals but do not fit it:")
+        lines += [f"  {f.name}: {f.why}" for f in unfit]
+    live = [f for f in ins.fits if f.live]
+    if live:
+        lines.append(f"live, as ArduCopter's telemetry (livesweep stream {ins.path} --mavlink udpout:127.0.0.1:14550 "
+                     f"--rate-hz {STREAM_RATE_HZ:g}):")
+        lines += [f"  {f.name}: {f.pairs}/{f.total}" if f.fits else f"  not {f.name}: {f.why}" for f in live]
+        if ins.live_maps:
+            lines.append(f"  monitor it with: livesweep monitor --mavlink udpin:127.0.0.1:14550 --map {ins.live_maps[0]}")
     return "\n".join(lines)

@@ -45,16 +45,20 @@ class FrameQueue:
         self._closed = False
         self._cv = threading.Condition()
 
-    def put(self, frames: list) -> None:
-        """Queue ``frames`` (a list; dropped and counted beyond the limit when shedding)."""
+    def put(self, frames: list, keep=None) -> None:
+        """Queue ``frames`` (a list; dropped and counted beyond the limit when shedding, except those
+        whose topic ``keep(topic)`` says must reach the analysis: test-point evidence)."""
         if not frames:
             return
         with self._cv:
             if self.shedding:
                 room = self.limit - self._n
                 if room < len(frames):
-                    self.shed += len(frames) - max(room, 0)
-                    frames = frames[:max(room, 0)]
+                    kept = [f for f in frames if keep is not None and keep(f.topic)]
+                    others = [f for f in frames if keep is None or not keep(f.topic)]
+                    room = max(room - len(kept), 0)
+                    self.shed += max(len(others) - room, 0)
+                    frames = kept + others[:room] if kept else others[:room]
                     if not frames:
                         return
             else:
@@ -147,8 +151,10 @@ class Ingest(threading.Thread):
             err, self.error = self.error, None
             raise err
 
-    def _take(self, frames: list) -> None:
-        if self.recorder is not None:
+    def _take(self, frames: list, recorded: bool = False) -> None:
+        """Record ``frames`` (unless their source recorded them already: the recorder process's) and
+        queue the ones the analysis needs."""
+        if self.recorder is not None and not recorded:
             self.recorder.record(frames)
         self.received += len(frames)
         last = self.last_rx
@@ -165,7 +171,7 @@ class Ingest(threading.Thread):
             # and the first frame of every other topic: the analysis names what the link carries
             # when a map finds nothing, from the frames it took (so a replay names the same)
             frames = [f for f in frames if self._wants(f.topic) or (first is not None and id(f) in first)]
-        self.queue.put(frames)
+        self.queue.put(frames, keep=self.also_wanted)
 
     def _wants(self, topic: str) -> bool:
         w = self._verdicts.get(topic)
@@ -181,7 +187,7 @@ class Ingest(threading.Thread):
                 for src in self.sources:
                     frames = src.poll(timeout_s=timeout)
                     if frames:
-                        self._take(frames)
+                        self._take(frames, getattr(src, "recorded", False))
                 if self.recorder is not None:
                     self.recorder.maybe_flush()
                 if self.finished:
@@ -203,4 +209,4 @@ class Ingest(threading.Thread):
                 if not frames:
                     break
                 self.drained += len(frames)
-                self._take(frames)
+                self._take(frames, getattr(src, "recorded", False))

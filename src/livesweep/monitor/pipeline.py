@@ -355,6 +355,10 @@ class MonitorPipeline:
         queue = FrameQueue(self.queue_limit, shed=live)
         ingest = self._ingest = Ingest(self.sources, queue, recorder=self.recorder, wanted_topics=self._wanted,
                                        also_wanted=self.test_points.wants)
+        for src in self.sources:             # a recorder process forwards only what the analysis takes
+            if hasattr(src, "want"):
+                src.want(self._wanted | {"/mavlink/PARAM_VALUE", "/mavlink/STATUSTEXT", "/mavlink/HEARTBEAT",
+                                         "/mavlink/NAMED_VALUE_INT"})
         switch = sys.getswitchinterval()
         sys.setswitchinterval(min(switch, SWITCH_INTERVAL_S))   # the ingest thread gets the GIL promptly
         ingest.start()
@@ -367,7 +371,7 @@ class MonitorPipeline:
                     self._take(f)
                 self.totals.analysed += len(frames)
                 self.totals.frames = ingest.received
-                self.analysis_shed = queue.shed
+                self.analysis_shed = queue.shed + self._sources_shed()
                 if frames and live and self._oldest_unlogged is None:
                     self._oldest_unlogged = frames[0].receive_ns
                 pending += len(frames)
@@ -396,7 +400,7 @@ class MonitorPipeline:
             queue.close()
             ingest.join()
             self.totals.frames = ingest.received
-            self.analysis_shed = queue.shed
+            self.analysis_shed = queue.shed + self._sources_shed()
             try:
                 while frames := queue.get(timeout_s=0):      # what the analysis had not taken yet
                     for f in frames:
@@ -459,6 +463,19 @@ class MonitorPipeline:
             if records := self.test_points.expire(t):
                 self._test_point_records(records, log_time_ns=f.receive_ns)
 
+    def _sources_shed(self) -> int:
+        """Frames a recorder process could not hand to the analysis (recorded all the same)."""
+        return sum(int(getattr(src, "shed", 0) or 0) for src in self.sources)
+
+    def _last_rx(self, ingest: Ingest) -> dict:
+        """Receive time [ns] of the latest frame per system: what reached the analysis, or, from a
+        recorder process, what reached the recorder (a busy analysis is not a lost link)."""
+        last = dict(ingest.last_rx)
+        for src in self.sources:
+            for k, v in (getattr(src, "last_rx", None) or {}).items():
+                last[k] = max(last.get(k, 0), v)
+        return last
+
     def _watch_link(self, ingest: Ingest) -> None:
         """A test point whose vehicle has sent nothing for :data:`LOST_AFTER_S` of receive time is
         closed NO-GO, "telemetry lost": the event is recorded (``LOST_TOPIC``) and taken like any
@@ -467,7 +484,8 @@ class MonitorPipeline:
         if tracker.current is None and not tracker.closing:
             return
         sysid = self.aligner.system
-        last = ingest.last_rx.get(sysid) if sysid is not None else max(ingest.last_rx.values(), default=None)
+        seen = self._last_rx(ingest)
+        last = seen.get(sysid) if sysid is not None else max(seen.values(), default=None)
         if last is None:
             return
         now = receive_ns()

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from livesweep.monitor.vehicle import VehicleInfo, axis_name
+from livesweep.monitor.vehicle import MULTIROTOR_TYPES, VehicleInfo, axis_name
 from livesweep.spectral.injection import SweepInjection
 from livesweep.spectral.test_point import TestPointJudgement, judge_test_point
 from livesweep.telemetry.frames import Frame
@@ -84,7 +84,6 @@ _MAX_DETECTION_S = 60.0
 _START = re.compile(r"SystemID Starting: axis=(\d+)")
 _FINISHED = re.compile(r"SystemID Finished")
 _MARKER_TEXT = re.compile(r"^\s*(?:livesweep|testpoint)\s*:?\s*(start|end)(?:\s+(\S+))?", re.I)
-_MULTIROTOR_TYPES = {2, 3, 4, 13, 14, 15, 29}      # MAV_TYPE quad, coax, heli, hexa, octo, tri, dodeca
 
 
 @dataclass(frozen=True)
@@ -383,7 +382,7 @@ class TestPointTracker:
                                           injection=self.vehicle.injection(axis, sids=d), axis=axis))
         elif topic in ("/mavlink/HEARTBEAT", "/dataflash/MODE") and auto:
             if topic == "/mavlink/HEARTBEAT":
-                if d.get("autopilot") != 3 or d.get("type") not in _MULTIROTOR_TYPES:
+                if d.get("autopilot") != 3 or d.get("type") not in MULTIROTOR_TYPES:
                     return []
                 mode = d.get("custom_mode")
             else:

@@ -41,6 +41,8 @@ FRAME_TYPES = {0: "PLUS", 1: "X", 2: "V", 3: "H", 4: "V_TAIL", 5: "A_TAIL", 10: 
 TOPICS = ("/mavlink/PARAM_VALUE", "/dataflash/PARM", "/dataflash/SIDS", "/mavlink/STATUSTEXT", "/dataflash/MSG",
           "/mavlink/HEARTBEAT")
 
+#: MAV_TYPE of the multirotors whose frame FRAME_CLASS / FRAME_TYPE name (quad, coax, heli, hexa, octo, tri, dodeca, deca).
+MULTIROTOR_TYPES = {2, 3, 4, 13, 14, 15, 29, 35}
 _FRAME_TEXT = re.compile(r"^Frame:\s*([A-Z0-9_]+)(?:/([A-Z0-9_]+))?")
 _AUTOPILOT_ARDUPILOT = 3
 _GCS_AUTOPILOT = 8                      # MAV_AUTOPILOT_INVALID: a ground station's heartbeat
@@ -55,10 +57,11 @@ def axis_name(axis: int | None) -> str:
 
 
 def frame_name(frame_class: int | None, frame_type: int | None) -> str:
-    """``"QUAD/PLUS (FRAME_CLASS 1, FRAME_TYPE 0)"``."""
+    """``"QUAD/PLUS (FRAME_CLASS 1, FRAME_TYPE 0)"`` (the parts the vehicle said)."""
     c = FRAME_CLASSES.get(frame_class, "?") if frame_class is not None else "?"
     t = FRAME_TYPES.get(frame_type, "?") if frame_type is not None else "?"
-    return f"{c}/{t} (FRAME_CLASS {frame_class}, FRAME_TYPE {frame_type})"
+    said = ", ".join(f"{k} {v}" for k, v in (("FRAME_CLASS", frame_class), ("FRAME_TYPE", frame_type)) if v is not None)
+    return f"{c}/{t} ({said})"
 
 
 class VehicleInfo:
@@ -152,27 +155,24 @@ class VehicleInfo:
         return c, t
 
     def contradiction(self, expected: dict) -> str | None:
-        """Why a map made for ``expected`` (parameter -> value or list of values; ``MAV_TYPE`` for the
+        """Why a map made for ``expected`` (parameter -> value or values; ``MAV_TYPE`` for the
         heartbeat type) does not fit this vehicle, or None while nothing said contradicts it."""
+        from livesweep.maps import vehicle_fits
+
         if not expected:
             return None
         have = dict(self.parameters)
         c, t = self.frame()
-        if c is not None:
-            have.setdefault("FRAME_CLASS", float(c))
-        if t is not None:
-            have.setdefault("FRAME_TYPE", float(t))
-        if self.mav_type is not None:
-            have["MAV_TYPE"] = float(self.mav_type)
+        have.update({k: float(v) for k, v in (("FRAME_CLASS", c), ("FRAME_TYPE", t), ("MAV_TYPE", self.mav_type))
+                     if v is not None})
+        if vehicle_fits(expected, have):
+            return None
         wrong = []
         for name, want in expected.items():
-            if name not in have:
-                continue
             allowed = want if isinstance(want, (list, tuple)) else (want,)
-            if not any(abs(have[name] - float(a)) < 1e-6 for a in allowed):
-                shown = "/".join(f"{float(a):g}" for a in allowed)
+            if name in have and not vehicle_fits({name: tuple(allowed)}, have):
+                shown = " or ".join(f"{float(a):g}" for a in allowed)
                 wrong.append(f"{name} {have[name]:g} (the map is for {shown})")
-        if not wrong:
-            return None
-        said = frame_name(c, t) if c is not None or t is not None else "its parameters"
-        return f"the vehicle is {said}: {', '.join(wrong)}"
+        copter = self.mav_type is None or self.mav_type in MULTIROTOR_TYPES
+        said = f"the vehicle is {frame_name(c, t)}" if c is not None and copter else "the vehicle says"
+        return f"{said}: {', '.join(wrong)}"

@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 import time
 
-__all__ = ["ReceiveClock", "StampClock", "UINT64_NS_MAX", "receive_ns"]
+__all__ = ["ReceiveClock", "StampClock", "UINT64_NS_MAX", "receive_ns", "receive_offset_ns", "set_receive_offset_ns"]
 
 #: The largest time an MCAP record can carry [ns].
 UINT64_NS_MAX = 2**64 - 1
@@ -58,6 +58,18 @@ def receive_ns() -> int:
     """Now on the process's one receive clock [ns since the UNIX epoch, monotonic]: the sources stamp
     frames with it and the monitor stamps its results with it, so both share one time base."""
     return _RECEIVE_CLOCK.now_ns()
+
+
+def receive_offset_ns() -> int:
+    """The receive clock's offset from the monotonic clock [ns]: a helper process given it
+    (:func:`set_receive_offset_ns`) stamps on exactly this process's receive clock."""
+    return _RECEIVE_CLOCK._offset
+
+
+def set_receive_offset_ns(offset_ns: int) -> None:
+    """Stamp on another process's receive clock (its :func:`receive_offset_ns`): the monotonic clock
+    is the machine's, so the two processes' receive times then compare to the nanosecond."""
+    _RECEIVE_CLOCK._offset = int(offset_ns)
 
 
 class StampClock:

@@ -98,7 +98,7 @@ from livesweep.telemetry.frames import Frame
 from livesweep.telemetry.mavlink_codec import _dialect, mavutil  # imported with MAVLINK20=1
 from livesweep.telemetry.mavlink_out import parse_url
 
-__all__ = ["MavlinkSource", "TlogSource"]
+__all__ = ["MavlinkSource", "TlogSource", "MavlinkDecoder"]
 
 log = logging.getLogger(__name__)
 
@@ -162,8 +162,9 @@ def _check_key(signing_key: Any) -> bytes | None:
     return bytes(signing_key)
 
 
-class _Decoder:
-    """Bare pymavlink parsers plus the checking, counting and Frame building shared by the sources."""
+class MavlinkDecoder:
+    """Bare pymavlink parsers plus the checking, counting and Frame building shared by the sources
+    (and by the recorder process, :mod:`livesweep.telemetry.capture`)."""
 
     def __init__(self, signing_key: bytes | None, allow_unsigned: bool, *, live: bool) -> None:
         self.counts = _empty_counts()
@@ -343,6 +344,17 @@ class _Decoder:
     def snapshot(self) -> dict[str, Any]:
         return {k: (dict(v) if isinstance(v, dict) else v) for k, v in self.counts.items()}
 
+    def datagram(self, data: bytes, receive_ns: int, out: list[Frame] | collections.deque) -> None:
+        """Decode one UDP datagram into ``out``: each frame it holds counted and checked; a frame cut
+        at its end is counted (``bad_prefix_or_garbage``) and dropped, so it cannot eat the next
+        datagram's frames."""
+        self.counts["bytes"] += len(data)
+        for m in self.mav.parse_buffer(data) or ():
+            self.handle(m, receive_ns, out)
+        if self.pending_bytes():
+            self.reset()
+            self.counts["bad_prefix_or_garbage"] += 1
+
 
 # ======================================================================================
 # Live source
@@ -445,7 +457,7 @@ class MavlinkSource:
         key = _check_key(signing_key)
         if isinstance(rcvbuf_bytes, bool) or not isinstance(rcvbuf_bytes, int) or rcvbuf_bytes <= 0:
             raise ConfigError(f"rcvbuf_bytes {rcvbuf_bytes!r} must be a positive integer")
-        self._dec = _Decoder(key, allow_unsigned, live=True)
+        self._dec = MavlinkDecoder(key, allow_unsigned, live=True)
         self._pending: collections.deque[Frame] = collections.deque()
         self._closed = False
         self._clients: dict[socket.socket, Any] = {}  # tcpin: accepted client -> its own parser
@@ -638,10 +650,7 @@ class MavlinkSource:
             if got is None:
                 return False
             data, _addr = got          # (pymavlink's set of peers is not kept: a monitor never sends)
-            self._parse(data, dec.mav, out)
-            if dec.pending_bytes():  # a frame cut at the end of the datagram
-                dec.reset()
-                dec.counts["bad_prefix_or_garbage"] += 1
+            dec.datagram(data, receive_ns(), out)
             return True
         if k == "tcpin":
             got = self._accept_clients()
@@ -784,7 +793,7 @@ class TlogSource:
         self.speed = s
         self._paced = s != 0 and not math.isinf(s)
         key = _check_key(signing_key)
-        self._dec = _Decoder(key, False, live=False)
+        self._dec = MavlinkDecoder(key, False, live=False)
         self._dec.counts.update({"records": 0, "garbage_bytes": 0, "truncated_tail": 0})
         self._pending: collections.deque[Frame] = collections.deque()
         self._closed = False

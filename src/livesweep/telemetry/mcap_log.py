@@ -441,6 +441,17 @@ class McapLogWriter:
                 assert self._file is not None
                 self._file.flush()
 
+    def write_encoded(self, topic: str, data: bytes, log_time_ns: int) -> None:
+        """Write one message that is JSON already (the recorder's raw datagrams: the hot path of a
+        live link, without :meth:`write`'s encoding and checks). ``topic`` must have been added and
+        ``data`` be a JSON object; ``publish_time`` is the receive time."""
+        cid = self._channels[topic][0]
+        seq = self._sequence[topic]
+        self._writer.add_message(channel_id=cid, log_time=log_time_ns, data=data, publish_time=log_time_ns,
+                                 sequence=seq & 0xFFFFFFFF)
+        self._sequence[topic] = seq + 1
+        self._message_counts[topic] += 1
+
     def add_metadata(self, name: str, values: dict[str, str]) -> None:
         """Add a metadata record (MCAP metadata is str -> str; values are converted with ``str()``).
 

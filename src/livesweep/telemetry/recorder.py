@@ -29,11 +29,15 @@ from livesweep.errors import LogFormatError
 from livesweep.numbers import float_json_schema
 from livesweep.telemetry.mcap_log import McapLogWriter
 
-__all__ = ["McapRecorder", "RESULT_PREFIX", "RESULT_SCHEMAS", "COUNTERS_METADATA"]
+__all__ = ["McapRecorder", "RESULT_PREFIX", "RESULT_SCHEMAS", "COUNTERS_METADATA", "RAW_TOPIC"]
 
 log = logging.getLogger(__name__)
 
 RESULT_PREFIX = "/livesweep"
+#: The live link's datagrams exactly as received, written by the recorder process before decoding
+#: (:mod:`livesweep.telemetry.capture`): ``{"src": k, "b64": ...}``, ``src`` indexing the channel's
+#: ``sources`` metadata. A replay takes the decoded channels instead.
+RAW_TOPIC = "/link/mavlink"
 #: Metadata record with the final link and pipeline counters (JSON text per source), written on close.
 COUNTERS_METADATA = "livesweep.counters"
 _GENERIC = {"type": "object", "description": "JSON object as received"}

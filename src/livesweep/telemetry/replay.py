@@ -8,7 +8,7 @@ import time
 from livesweep.errors import ConfigError
 from livesweep.telemetry.frames import Frame
 from livesweep.telemetry.mcap_log import SkippedMessages, iter_file_order
-from livesweep.telemetry.recorder import RESULT_PREFIX
+from livesweep.telemetry.recorder import RAW_TOPIC, RESULT_PREFIX
 
 __all__ = ["McapReplaySource"]
 
@@ -23,6 +23,9 @@ class McapReplaySource:
         0 or inf: as fast as possible; N: N times real time (paced by the receive times).
     include_results : bool
         Replay livesweep's own ``/livesweep/...`` results too (default no: they are recomputed).
+
+    The raw datagrams a live recording keeps (``RAW_TOPIC``) are not replayed: the decoded
+    ``/mavlink/<MSG>`` channels carry the same frames, as the live analysis took them.
 
     A message that is not a JSON object (damaged, nested too deeply, an array) or a chunk that
     fails its CRC is skipped and counted (``counts["skipped_messages"]``, and by reason in
@@ -46,7 +49,7 @@ class McapReplaySource:
         self._t0_wall = 0.0
         self._pending = None
         self._finished = False
-        self._counts = {"replayed": {}, "skipped_results": 0}
+        self._counts = {"replayed": {}, "skipped_results": 0, "skipped_raw": 0}
 
     @property
     def counts(self) -> dict:
@@ -67,6 +70,9 @@ class McapReplaySource:
                 break
             if m.topic.startswith(RESULT_PREFIX + "/") and not self._include_results:
                 self._counts["skipped_results"] += 1
+                continue
+            if m.topic == RAW_TOPIC:
+                self._counts["skipped_raw"] += 1
                 continue
             if paced:
                 if self._t0_log is None:

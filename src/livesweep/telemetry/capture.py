@@ -1,0 +1,733 @@
+"""The live recording in a process of its own: no analysis, no busy machine can starve it.
+
+A field laptop also runs a ground station and video; the monitor's analysis (aligner, spectra,
+Rerun) may fall behind. The recording must not. :class:`LiveCapture` starts a *recorder process*
+(``python -m livesweep.telemetry.capture``) that owns the monitor's UDP sockets and its MCAP file:
+
+* **The bytes first.** A loop that does nothing else takes every datagram off its socket (a kernel
+  buffer sized for seconds of stream: :data:`RCVBUF_BYTES`, forced past ``net.core.rmem_max`` where
+  the process may) and writes it, as received, to the MCAP (``/link/mavlink``: the datagram in
+  base64 with its receive time) before any parsing: nothing the link delivered is lost to a slow
+  decoder, and a kill loses at most the last second.
+* **Then the decoded messages.** Between reads it decodes the datagrams into the usual
+  ``/mavlink/<MSG>`` JSON channels (:class:`~livesweep.telemetry.mavlink_in.MavlinkDecoder`, the
+  live source's own checks and counters: CRC, signing, sequence gaps, clock plausibility), so
+  Foxglove and every livesweep reader find the messages as they always do. Under a burst it
+  falls behind and catches up; at the end it decodes everything left before finishing the file.
+* **Then the analysis.** The datagrams the analysis needs (the map's messages, test-point
+  evidence, the first of every message type) go to the monitor process over a socket that never
+  blocks the recorder: when the analysis is behind they are skipped *for the analysis only* and
+  counted (``analysis_shed``), except the test-point evidence (STATUSTEXT, HEARTBEAT, PARAM_VALUE,
+  NAMED_VALUE_INT), which waits and is never skipped, so a busy analysis never moves a test
+  point's edges. The monitor's results (``/livesweep/...``), its other sources' frames (Zenoh,
+  markers) and its counters come back over a second socket and are written to the same file.
+* **It finishes the file whatever happens to the monitor**: on the monitor's request (SIGTERM,
+  SIGHUP, Ctrl-C and ``--duration`` end the monitor that way), when the monitor process dies (even
+  by SIGKILL: the socket closes) and on SIGTERM to the recorder itself. It ignores Ctrl-C and
+  SIGHUP, which a terminal sends to the whole process group: the monitor decides when to stop.
+
+Everything the recorder counts (datagrams, bytes, kernel drops, the decoder's counters, the
+analysis shed) reaches the monitor about four times a second and is recorded like a live
+source's counts.
+"""
+
+from __future__ import annotations
+
+import base64
+import errno
+import json
+import logging
+import os
+import pickle
+import select
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+from livesweep.errors import ConfigError, LivesweepError, LogFormatError
+from livesweep.telemetry.recorder import RAW_TOPIC
+
+__all__ = ["LiveCapture", "CaptureSource", "CaptureRecorder", "RAW_TOPIC", "RCVBUF_BYTES", "EVENT_MESSAGES",
+           "frame_msgids"]
+
+log = logging.getLogger(__name__)
+
+#: Kernel receive buffer asked for per UDP socket [bytes]: about 4 s at 2 000 small datagrams/s
+#: (each costs about 1 kB of buffer, not its length).
+RCVBUF_BYTES = 16 << 20
+#: MAVLink messages that carry test-point evidence or what the vehicle says of itself: forwarded to
+#: the analysis even when it is behind (never shed).
+EVENT_MESSAGES = {0: "HEARTBEAT", 22: "PARAM_VALUE", 252: "NAMED_VALUE_INT", 253: "STATUSTEXT"}
+_RAW_SCHEMA = {"type": "object", "description": "A MAVLink datagram exactly as received (base64)",
+               "properties": {"src": {"type": "integer", "description": "index into the channel's sources"},
+                              "b64": {"type": "string", "contentEncoding": "base64"}},
+               "required": ["src", "b64"]}
+_SO_RXQ_OVFL = 40
+_SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)
+_STATUS_EVERY_S = 0.25        # counters to the monitor this often [s]
+_FLUSH_EVERY_S = 1.0          # chunks to the OS this often: the most a kill loses [s]
+_DRAIN_S = 5.0                # at the end, read the sockets until empty for at most this long [s]
+_BATCH_BYTES = 48 * 1024      # datagrams forwarded per packet to the monitor, at most
+_PENDING_EVENTS = 100_000     # event datagrams waiting for the monitor, at most (then they are shed too)
+_READY_S = 20.0               # the recorder process must be ready within this [s]
+
+
+def frame_msgids(data: bytes) -> list[int] | None:
+    """The message ids of the MAVLink frames in a datagram, from their headers alone (no CRC, no
+    decoding); None when the bytes do not frame as MAVLink (the decoder then judges them)."""
+    out, p, n = [], 0, len(data)
+    while p < n:
+        magic = data[p]
+        if magic == 0xFD and p + 10 <= n:
+            length = 12 + data[p + 1] + (13 if data[p + 2] & 1 else 0)
+            out.append(data[p + 7] | (data[p + 8] << 8) | (data[p + 9] << 16))
+        elif magic == 0xFE and p + 6 <= n:
+            length = 8 + data[p + 1]
+            out.append(data[p + 5])
+        else:
+            return None
+        p += length
+    return out
+
+
+def open_udp(host: str, port: int, rcvbuf_bytes: int = RCVBUF_BYTES) -> tuple[socket.socket, int]:
+    """A bound, non-blocking UDP socket with the kernel's drop count on every datagram and a large
+    receive buffer (forced past ``net.core.rmem_max`` where the process may); returns it and the
+    buffer granted [bytes]."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_DGRAM)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        for opt in (_SO_RCVBUFFORCE, socket.SO_RCVBUF):
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, opt, rcvbuf_bytes)
+                break
+            except OSError:
+                continue
+        if sys.platform.startswith("linux"):
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, _SO_RXQ_OVFL, 1)
+            except OSError:  # pragma: no cover - an old kernel: drops stay unknown
+                pass
+        sock.bind((host, port))
+        sock.setblocking(False)
+        return sock, sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+    except OSError as e:
+        sock.close()
+        raise LivesweepError(f"MAVLink input udpin:{host}:{port} cannot be opened: {e.strerror or e}") from None
+
+
+# ================================================================================================
+# the monitor's side
+# ================================================================================================
+
+
+class CaptureSource:
+    """The analysis' view of the recorder process: the frames it forwards (implements
+    ``frames.Source``; the frames are recorded already, so the monitor does not record them again).
+
+    ``counts`` are the recorder's: every datagram it read, the decoder's counters, kernel drops and
+    ``analysis_shed`` (datagrams skipped for the analysis, recorded all the same).
+    """
+
+    live = True
+    #: The frames come recorded: the monitor's ingest must not write them again.
+    recorded = True
+
+    def __init__(self, capture: "LiveCapture"):
+        self._cap = capture
+        self.description = ", ".join(capture.urls)
+        self.url = self.description
+
+    @property
+    def counts(self) -> dict:
+        return self._cap.counts
+
+    @property
+    def finished(self) -> bool:
+        return self._cap.ended
+
+    @property
+    def shed(self) -> int:
+        """Datagrams the recorder could not hand to the analysis (recorded all the same)."""
+        return int(self._cap.counts.get("analysis_shed", 0))
+
+    @property
+    def last_rx(self) -> dict:
+        """Receive time [ns] of the latest frame per system id, as the recorder saw them."""
+        return self._cap.last_rx
+
+    def want(self, topics) -> None:
+        """Forward only datagrams with one of these ``/mavlink/<MSG>`` topics (and the first of every
+        message type, and the test-point evidence)."""
+        self._cap.want(topics)
+
+    def poll(self, timeout_s: float = 0.05, max_frames: int = 10_000) -> list:
+        return self._cap.poll(timeout_s, max_frames)
+
+    def close(self) -> None:
+        pass            # the recorder closes the capture (it must finish the file first)
+
+
+class CaptureRecorder:
+    """The recorder interface (:class:`~livesweep.telemetry.recorder.McapRecorder`'s) of the recorder process."""
+
+    def __init__(self, capture: "LiveCapture"):
+        self._cap = capture
+        self.path = capture.record_path
+        self.bad_publish_time = 0
+        self.unrecordable = 0
+
+    def record(self, frames) -> None:
+        """Frames of the monitor's other sources (Zenoh, markers, its own events)."""
+        if frames:
+            self._cap.send(("frames", [(f.topic, f.receive_ns, f.vehicle_ns, f.data) for f in frames]))
+
+    def record_result(self, name: str, payload: dict, log_time_ns: int, *, flush: bool = False) -> None:
+        self._cap.send(("result", name, payload, int(log_time_ns), bool(flush)))
+
+    def set_counters(self, counters: dict) -> None:
+        self._cap.send(("counters", counters))
+
+    def maybe_flush(self) -> None:
+        pass            # the recorder flushes on its own clock
+
+    @property
+    def message_counts(self) -> dict:
+        return dict(self._cap.summary.get("message_counts", {}))
+
+    def close(self):
+        return self._cap.close()
+
+
+class LiveCapture:
+    """Starts and talks to the recorder process (module docstring).
+
+    Parameters
+    ----------
+    urls : list of str
+        ``udpin:HOST:PORT`` inputs (port 0: any free port; :attr:`urls` then says which).
+    record_path : str or Path, optional
+        The MCAP file to write; None: the process reads and forwards, records nothing.
+    overwrite : bool
+        Replace an existing file (``--force``).
+    settings, metadata : dict, optional
+        As :class:`~livesweep.telemetry.recorder.McapRecorder`'s.
+    signing_key : bytes, optional
+        32-byte MAVLink 2 signing key (unsigned and forged frames are refused and counted).
+    rcvbuf_bytes : int
+        Kernel receive buffer asked for per socket [bytes].
+
+    Raises
+    ------
+    ConfigError, LivesweepError, LogFormatError
+        A url that is not ``udpin``, a port that cannot be bound, a file that exists (without
+        ``overwrite``) or is being written by another process: one line naming it.
+    """
+
+    def __init__(self, urls, *, record_path=None, overwrite: bool = False, settings: dict | None = None,
+                 metadata: dict | None = None, signing_key: bytes | None = None,
+                 rcvbuf_bytes: int = RCVBUF_BYTES):
+        from livesweep.telemetry.clock import receive_offset_ns
+        from livesweep.telemetry.mavlink_in import MavlinkDecoder, parse_source_url
+
+        self.record_path = None if record_path is None else Path(record_path)
+        if self.record_path is not None and self.record_path.exists() and not overwrite:
+            raise LogFormatError(f"MCAP log {self.record_path} exists: it is not overwritten unless asked (--force)")
+        self._socks, self.urls, self.rcvbuf_granted = [], [], []
+        self._key = signing_key
+        try:
+            for url in urls:
+                t = parse_source_url(url)
+                if t["kind"] != "udpin":
+                    raise ConfigError(f"MAVLink input {url!r}: the recorder process reads udpin links only")
+                sock, granted = open_udp(t["host"], t["port"], rcvbuf_bytes)
+                self._socks.append(sock)
+                self.rcvbuf_granted.append(granted)
+                host, port = sock.getsockname()[:2]
+                self.urls.append(f"udpin:{host}:{port}")
+            self._frames_rx, frames_tx = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+            ctl_tx, ctl_rx = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+            for s in (frames_tx, self._frames_rx, ctl_tx):
+                for opt in (socket.SO_SNDBUF, socket.SO_RCVBUF):
+                    try:
+                        s.setsockopt(socket.SOL_SOCKET, opt, 8 << 20)
+                    except OSError:  # pragma: no cover
+                        pass
+            self._frames_rx.setblocking(False)
+            config = {"urls": self.urls, "fds": [s.fileno() for s in self._socks], "frames_fd": frames_tx.fileno(),
+                      "ctl_fd": ctl_rx.fileno(), "record": None if record_path is None else str(record_path),
+                      "overwrite": bool(overwrite), "settings": settings, "metadata": metadata,
+                      "key": None if signing_key is None else signing_key.hex(), "clock_offset_ns": receive_offset_ns()}
+            env = dict(os.environ)
+            src = str(Path(__file__).resolve().parents[2])
+            env["PYTHONPATH"] = src + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+            self._proc = subprocess.Popen([sys.executable, "-m", "livesweep.telemetry.capture"], stdin=subprocess.PIPE,
+                                          pass_fds=[*config["fds"], config["frames_fd"], config["ctl_fd"]], env=env,
+                                          start_new_session=False)
+            self._proc.stdin.write(json.dumps(config).encode())
+            self._proc.stdin.close()
+            frames_tx.close()
+            ctl_rx.close()
+            self._ctl = ctl_tx
+            self._wait_ready()
+        except BaseException:
+            self._abandon()
+            raise
+        for s in self._socks:            # the recorder has its own copies
+            s.close()
+        self._decoders = [MavlinkDecoder(signing_key, False, live=True) for _ in self.urls]
+        self.counts: dict = {"received": {}, "by_system": {}, "datagrams": 0, "analysis_shed": 0}
+        self.last_rx: dict = {}
+        self.summary: dict = {}
+        self.ended = False
+        self._closed = False
+        self._pending: deque = deque()
+        self.source = CaptureSource(self)
+        self.recorder = CaptureRecorder(self)
+
+    # -- start and stop ---------------------------------------------------------------------------
+    def _wait_ready(self) -> None:
+        deadline = time.monotonic() + _READY_S
+        while time.monotonic() < deadline:
+            r, _, _ = select.select([self._frames_rx], [], [], 0.1)
+            if r:
+                msg = pickle.loads(self._frames_rx.recv(1 << 20))
+                if msg[0] == "ready":
+                    return
+                if msg[0] == "error":
+                    raise LogFormatError(msg[1])
+            if self._proc.poll() is not None:
+                raise LivesweepError(f"the recorder process ended at start (exit code {self._proc.returncode})")
+        raise LivesweepError(f"the recorder process did not start within {_READY_S:g} s")
+
+    def _abandon(self) -> None:
+        for s in getattr(self, "_socks", []):
+            s.close()
+        proc = getattr(self, "_proc", None)
+        if proc is not None and proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+    def send(self, msg: tuple) -> None:
+        """One message to the recorder process (blocks while it is busy; never drops)."""
+        if self._closed:
+            return
+        data = pickle.dumps(msg, protocol=pickle.HIGHEST_PROTOCOL)
+        try:
+            self._ctl.sendall(struct.pack("<I", len(data)) + data)
+        except OSError as e:
+            raise LivesweepError(f"the recorder process is gone ({e.strerror or e}); "
+                                 f"exit code {self._proc.poll()}") from None
+
+    def want(self, topics) -> None:
+        from livesweep.telemetry.mavlink_codec import message_class
+
+        ids = set()
+        for t in topics:
+            if t.startswith("/mavlink/"):
+                try:
+                    ids.add(message_class(t.split("/", 2)[2]).id)
+                except ConfigError:
+                    continue
+        self.send(("want", sorted(ids)))
+
+    def close(self):
+        """Ask the recorder to read what the sockets still hold, decode everything, finish the file
+        and end; returns the file's path (None without one). Idempotent."""
+        if self._closed:
+            return self.record_path
+        self._closed = True
+        try:
+            data = pickle.dumps(("close",), protocol=pickle.HIGHEST_PROTOCOL)
+            self._ctl.sendall(struct.pack("<I", len(data)) + data)
+        except OSError:
+            pass
+        self._ctl.close()
+        self._frames_rx.setblocking(True)
+        self._frames_rx.settimeout(1.0)
+        while True:          # the last status and the summary; frames after the stop are of no use now
+            try:
+                raw = self._frames_rx.recv(1 << 22)
+            except socket.timeout:
+                if self._proc.poll() is not None:
+                    break
+                continue
+            except OSError:
+                break
+            if not raw:
+                break
+            msg = pickle.loads(raw)
+            if msg[0] == "status":
+                self._status(msg[1])
+            elif msg[0] == "closed":
+                self.summary = msg[1]
+                self._status(msg[1]["status"])
+            elif msg[0] == "error":
+                self.summary = {"error": msg[1]}
+        self._proc.wait()
+        self._frames_rx.close()
+        self.ended = True
+        if self.summary.get("error"):
+            raise LogFormatError(self.summary["error"])
+        if self._proc.returncode != 0:
+            raise LivesweepError(f"the recorder process failed (exit code {self._proc.returncode})")
+        return self.record_path
+
+    # -- frames -----------------------------------------------------------------------------------
+    def _status(self, st: dict) -> None:
+        self.counts = st["counts"]
+        self.last_rx = st["last_rx"]
+
+    def poll(self, timeout_s: float = 0.05, max_frames: int = 10_000) -> list:
+        """Frames the recorder forwarded (decoded here), waiting up to ``timeout_s`` when there are none."""
+        out: list = []
+        if self._closed:
+            return out
+        sock = self._frames_rx
+        waited = False
+        while len(out) < max_frames:
+            try:
+                raw = sock.recv(1 << 22)
+            except (BlockingIOError, InterruptedError):
+                if out or waited or not timeout_s:
+                    break
+                select.select([sock], [], [], timeout_s)
+                waited = True
+                continue
+            if not raw:
+                self.ended = True
+                break
+            msg = pickle.loads(raw)
+            if msg[0] == "data":
+                for k, rx, data in msg[1]:
+                    self._decoders[k].datagram(data, rx, out)
+            elif msg[0] == "status":
+                self._status(msg[1])
+            elif msg[0] == "error":
+                raise LogFormatError(msg[1])
+        return out
+
+
+# ================================================================================================
+# the recorder process
+# ================================================================================================
+
+
+class _Recorder:
+    """The recorder process's loop (module docstring)."""
+
+    def __init__(self, cfg: dict):
+        from livesweep.telemetry import clock
+        from livesweep.telemetry.mavlink_in import MavlinkDecoder
+        from livesweep.telemetry.recorder import McapRecorder
+
+        clock.set_receive_offset_ns(cfg["clock_offset_ns"])
+        self.receive_ns = clock.receive_ns
+        self.urls = cfg["urls"]
+        self.socks = [socket.socket(fileno=fd) for fd in cfg["fds"]]
+        self.out = socket.socket(fileno=cfg["frames_fd"])
+        self.out.setblocking(False)
+        self.ctl = socket.socket(fileno=cfg["ctl_fd"])
+        self.ctl.setblocking(False)
+        self.ctl_buf = bytearray()
+        key = bytes.fromhex(cfg["key"]) if cfg.get("key") else None
+        self.decoders = [MavlinkDecoder(key, False, live=True) for _ in self.urls]
+        self.rec = None
+        if cfg.get("record"):
+            self.rec = McapRecorder(cfg["record"], settings=cfg.get("settings"), metadata=cfg.get("metadata"),
+                                    overwrite=cfg.get("overwrite", False))
+            self.rec.writer.add_channel(RAW_TOPIC, "livesweep.datagram", _RAW_SCHEMA,
+                                        {"sources": json.dumps(self.urls)})
+        self.backlog: deque = deque()          # (src, receive ns, bytes) not decoded yet
+        self.fwd: list = []                    # (src, receive ns, bytes) for the monitor
+        self.fwd_bytes = 0
+        self.events: deque = deque()           # event packets waiting for the monitor
+        self.wanted: set | None = None         # msg ids the analysis wants (None: all)
+        self.seen_ids: set = set()
+        self.datagrams = [0] * len(self.urls)
+        self.bytes = [0] * len(self.urls)
+        self.kernel_drops = [0] * len(self.urls)
+        self.shed = 0
+        self.last_rx: dict = {}
+        self.closing = False
+        self.monitor_gone = False
+        self.last_status = self.last_flush = time.monotonic()
+        self.frames: list = []                 # decoded frames waiting for JSON (reused list)
+
+    # -- reading ----------------------------------------------------------------------------------
+    def read(self, k: int, budget: int = 2000) -> int:
+        """Take what socket ``k`` holds (at most ``budget`` datagrams): recorded raw at once."""
+        sock = self.socks[k]
+        rec = self.rec
+        write = rec.writer.write_encoded if rec is not None else None
+        n = 0
+        drops = None
+        b64 = base64.b64encode
+        prefix = b'{"src":%d,"b64":"' % k
+        while n < budget:
+            try:
+                data, anc, _flags, _addr = sock.recvmsg(65535, 64)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError as e:
+                if e.errno == errno.ECONNREFUSED:
+                    continue
+                raise
+            rx = self.receive_ns()
+            for level, kind, payload in anc:
+                if kind == _SO_RXQ_OVFL and len(payload) >= 4:
+                    drops = struct.unpack("I", payload[:4])[0]
+            if write is not None:
+                write(RAW_TOPIC, prefix + b64(data) + b'"}', rx)
+            self.backlog.append((k, rx, data))
+            self.bytes[k] += len(data)
+            n += 1
+            self.forward(k, rx, data)
+        self.datagrams[k] += n
+        if drops is not None:
+            self.kernel_drops[k] = drops
+        return n
+
+    def forward(self, k: int, rx: int, data: bytes) -> None:
+        """Hand a datagram to the analysis if it wants it; events are never shed."""
+        ids = frame_msgids(data)
+        event = False
+        if ids is None:
+            want = True
+        else:
+            want = self.wanted is None
+            for i in ids:
+                if i in EVENT_MESSAGES:
+                    event = True
+                if not want and (i in self.wanted or i not in self.seen_ids):
+                    want = True
+                self.seen_ids.add(i)
+        if not (want or event):
+            return
+        if event:
+            self.flush_forward()
+            self.send_out(("data", [(k, rx, data)]), event=True)
+            return
+        self.fwd.append((k, rx, data))
+        self.fwd_bytes += len(data) + 32
+        if self.fwd_bytes >= _BATCH_BYTES:
+            self.flush_forward()
+
+    def flush_forward(self) -> None:
+        if self.fwd:
+            batch, self.fwd, self.fwd_bytes = self.fwd, [], 0
+            self.send_out(("data", batch))
+
+    def send_out(self, msg: tuple, *, event: bool = False) -> bool:
+        """One packet to the monitor without ever waiting: a data packet that does not fit is shed
+        (counted); an event packet waits for room (bounded) after those already waiting."""
+        if self.monitor_gone:
+            return False
+        if event or self.events:
+            if event:
+                if len(self.events) >= _PENDING_EVENTS:
+                    self.shed += 1
+                    return False
+                self.events.append(pickle.dumps(msg, protocol=pickle.HIGHEST_PROTOCOL))
+                self.send_events()
+                return True
+        data = pickle.dumps(msg, protocol=pickle.HIGHEST_PROTOCOL)
+        try:
+            self.out.send(data)
+            return True
+        except (BlockingIOError, InterruptedError):
+            if msg[0] == "data":
+                self.shed += len(msg[1])
+            return False
+        except OSError:
+            self.monitor_gone = True
+            return False
+
+    def send_events(self) -> None:
+        while self.events:
+            try:
+                self.out.send(self.events[0])
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                self.monitor_gone = True
+                self.events.clear()
+                return
+            self.events.popleft()
+
+    # -- decoding -----------------------------------------------------------------------------------
+    def decode(self, max_n: int) -> int:
+        """Decode up to ``max_n`` datagrams of the backlog into the JSON channels."""
+        n = 0
+        frames = self.frames
+        last_rx = self.last_rx
+        while self.backlog and n < max_n:
+            k, rx, data = self.backlog.popleft()
+            self.decoders[k].datagram(data, rx, frames)
+            n += 1
+        if frames:
+            for f in frames:
+                last_rx[f.data.get("sysid")] = f.receive_ns
+            if self.rec is not None:
+                self.rec.record(frames)
+            frames.clear()
+        return n
+
+    def readable(self) -> bool:
+        """A socket has data waiting (checked between decoding slices)."""
+        r, _, _ = select.select(self.socks, [], [], 0)
+        return bool(r)
+
+    # -- the monitor's messages ---------------------------------------------------------------------
+    def control(self) -> None:
+        while True:
+            try:
+                chunk = self.ctl.recv(1 << 20)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:
+                chunk = b""
+            if not chunk:
+                self.monitor_gone = True
+                self.closing = True
+                break
+            self.ctl_buf += chunk
+        buf = self.ctl_buf
+        while len(buf) >= 4:
+            (n,) = struct.unpack_from("<I", buf)
+            if len(buf) < 4 + n:
+                break
+            msg = pickle.loads(bytes(buf[4:4 + n]))
+            del buf[:4 + n]
+            self.handle(msg)
+
+    def handle(self, msg: tuple) -> None:
+        kind = msg[0]
+        if kind == "result":
+            _, name, payload, log_ns, flush = msg
+            if self.rec is not None:
+                self.rec.record_result(name, payload, log_ns, flush=flush)
+        elif kind == "frames":
+            if self.rec is not None:
+                from livesweep.telemetry.frames import Frame
+
+                self.rec.record([Frame(t, rx, v, d) for t, rx, v, d in msg[1]])
+        elif kind == "counters":
+            if self.rec is not None:
+                self.rec.set_counters(msg[1])
+        elif kind == "want":
+            self.wanted = set(msg[1]) | set(EVENT_MESSAGES)
+        elif kind == "close":
+            self.closing = True
+
+    # -- status -------------------------------------------------------------------------------------
+    def status(self) -> dict:
+        counts: dict = {}
+        for k, dec in enumerate(self.decoders):
+            c = dec.snapshot()
+            c["kernel_drops"] = self.kernel_drops[k]
+            for key, v in c.items():
+                if isinstance(v, dict):
+                    merged = counts.setdefault(key, {})
+                    for kk, vv in v.items():
+                        merged[kk] = merged.get(kk, 0) + vv
+                else:
+                    counts[key] = counts.get(key, 0) + v
+        counts["datagrams"] = sum(self.datagrams)
+        counts["bytes"] = sum(self.bytes)
+        counts["analysis_shed"] = self.shed
+        counts["decode_backlog"] = len(self.backlog)
+        counts["rcvbuf_bytes"] = [s.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF) for s in self.socks]
+        return {"counts": counts, "last_rx": dict(self.last_rx)}
+
+    def periodic(self, now: float) -> None:
+        if now - self.last_status >= _STATUS_EVERY_S:
+            self.last_status = now
+            self.flush_forward()
+            self.send_out(("status", self.status()))
+        if self.rec is not None and now - self.last_flush >= _FLUSH_EVERY_S:
+            self.last_flush = now
+            self.rec.maybe_flush()
+
+    # -- the loop -----------------------------------------------------------------------------------
+    def run(self) -> None:
+        socks = self.socks
+        waitables = [*socks, self.ctl]
+        while not self.closing:
+            timeout = 0.0 if self.backlog else 0.05
+            r, _, _ = select.select(waitables, [], [], timeout)
+            got = 0
+            for k, s in enumerate(socks):
+                if s in r:
+                    got += self.read(k)
+            if got:
+                self.flush_forward()
+            if self.events:
+                self.send_events()
+            if self.ctl in r:
+                self.control()
+            # decode between reads, a slice at a time, while no datagram waits
+            while self.backlog and not self.closing:
+                self.decode(256)
+                if self.readable():
+                    break
+            self.periodic(time.monotonic())
+        self.finish()
+
+    def finish(self) -> None:
+        """Read what the sockets still hold, decode everything, finish the file, say so."""
+        deadline = time.monotonic() + _DRAIN_S
+        while time.monotonic() < deadline:
+            if not sum(self.read(k) for k in range(len(self.socks))):
+                break
+        self.flush_forward()
+        while self.backlog:
+            self.decode(10_000)
+        self.control()            # the monitor's last results and counters
+        st = self.status()
+        summary = {"status": st, "message_counts": {}}
+        if self.rec is not None:
+            summary["message_counts"] = dict(self.rec.message_counts)
+            self.rec.close()
+        if not self.monitor_gone:
+            self.out.setblocking(True)
+            self.send_events()
+            try:
+                self.out.send(pickle.dumps(("closed", summary), protocol=pickle.HIGHEST_PROTOCOL))
+            except OSError:
+                pass
+
+
+def _main() -> int:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)      # the terminal's Ctrl-C is the monitor's to handle
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    cfg = json.loads(sys.stdin.buffer.read())
+    out = socket.socket(fileno=cfg["frames_fd"])
+    try:
+        rec = _Recorder(cfg)
+    except (LivesweepError, OSError) as e:
+        out.send(pickle.dumps(("error", str(e))))
+        return 1
+    signal.signal(signal.SIGTERM, lambda *a: setattr(rec, "closing", True))
+    out.send(pickle.dumps(("ready",)))
+    try:
+        rec.run()
+    except LivesweepError as e:               # a full disk: one line to the monitor, the file kept
+        try:
+            rec.out.setblocking(True)
+            rec.out.send(pickle.dumps(("error", str(e))))
+        except OSError:
+            pass
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_main())
