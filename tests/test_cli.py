@@ -96,5 +96,5 @@ def test_replay_of_a_sample_log_gives_the_verdict():
                   str(root / "config" / "xv15_channels.toml"), "--window", "240", "--require", "p/da")
     assert r.returncode == 0, r.stderr
     assert "verdict: GO" in r.stdout
-    line = next(ln for ln in r.stdout.splitlines() if ln.strip().startswith("p/da"))
-    assert int(line.split("over")[1].split("%")[0]) >= 90
+    line = next(ln for ln in r.stdout.splitlines() if ln.strip().startswith("TP1 da"))   # the judged test point
+    assert ": GO;" in line and int(line.split("p/da ")[1].split(" %")[0]) >= 90, line

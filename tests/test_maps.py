@@ -450,10 +450,19 @@ def test_cli_lists_the_presets_and_refuses_bad_map_arguments_in_one_line(tmp_pat
 
 def test_replay_with_a_preset_analyses_the_presets_pairs():
     """The simulated XV-15 cruise log carries SERVO_OUTPUT_RAW and ATTITUDE, so ardupilot-plane's
-    signals resolve on it: the replay judges exactly the preset's 5 x 3 output/input pairs."""
-    r = livesweep("replay", str(ROOT / "replay_logs" / "xv15_cruise_verify.mcap"), "--map", "ardupilot-plane")
-    assert r.returncode == 0, r.stderr
-    pairs = [ln.split()[0] for ln in r.stdout.splitlines() if "adequate over" in ln]
+    signals resolve on it: the replay estimates exactly the preset's 5 x 3 output/input pairs, and the
+    command says so in one summary without a traceback."""
+    from livesweep.cli import _monitor_settings, build_parser
+    from livesweep.monitor.pipeline import MonitorPipeline
+    from livesweep.telemetry.replay import McapReplaySource
+
+    log = str(ROOT / "replay_logs" / "xv15_cruise_verify.mcap")
+    r = livesweep("replay", log, "--map", "ardupilot-plane")
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    assert "test points: 0" in r.stdout                # doublets only: no test point, no verdict on the window
+    settings = _monitor_settings(build_parser().parse_args(["replay", log, "--map", "ardupilot-plane"]))
+    summary = MonitorPipeline(settings, [McapReplaySource(log)], keep_estimates=False).run()
+    pairs = [f"{a['output']}/{a['input']}" for a in summary["adequacy"]]
     assert pairs == [f"{o}/{i}" for o in ("p", "q", "r", "phi", "theta") for i in ("da", "de", "dr")]
 
 

@@ -152,8 +152,7 @@ def cmd_demo(args) -> int:
     from livesweep.monitor.pipeline import MonitorPipeline, MonitorSettings
     from livesweep.monitor.rerun_view import RerunView
     from livesweep.sim.samples import SAMPLE_LOGS
-    from livesweep.telemetry.mavlink_in import MavlinkSource
-    from livesweep.telemetry.recorder import McapRecorder
+    from livesweep.telemetry.capture import LiveCapture
 
     out_dir = Path(args.out) if args.out else Path.cwd() / "livesweep-demo"
     if out_dir.exists() and not out_dir.is_dir():
@@ -170,13 +169,14 @@ def cmd_demo(args) -> int:
     signals, _ = load_channel_map(channels)
     settings = MonitorSettings(signals=signals, inputs=("da",), outputs=("p", "r", "ay", "beta"), band_rad_s=(0.3, 20.0),
                                sample_rate_hz=50.0, window_s=240.0, required_pairs=(("p", "da"),))
-    source = MavlinkSource("udpin:127.0.0.1:0")
-    port = source.local_address[1]
     log = out_dir / "live.mcap"
     rrd = out_dir / "live.rrd"
-    recorder = McapRecorder(log, settings=settings.to_dict(), overwrite=True,     # the demo rewrites its own folder
-                            metadata={"test_point": {"aircraft": "XV-15", "manoeuvre": "aileron sweeps x2 (simulated)",
-                                                     "source": "livesweep demo"}})
+    # the link and the recording in a process of their own, as the monitor runs them
+    capture = LiveCapture(["udpin:127.0.0.1:0"], record_path=log, settings=settings.to_dict(), overwrite=True,
+                          metadata={"test_point": {"aircraft": "XV-15", "manoeuvre": "aileron sweeps x2 (simulated)",
+                                                   "source": "livesweep demo"}})       # the demo rewrites its own folder
+    port = int(capture.urls[0].rsplit(":", 1)[1])
+    source, recorder = capture.source, capture.recorder
     from livesweep.monitor.foxglove import write_layout
 
     layout = write_layout(log, settings.signals, settings.inputs, settings.outputs)
@@ -199,6 +199,7 @@ def cmd_demo(args) -> int:
     try:
         summary = pipe.run(stop=stop)
     finally:
+        capture.close()
         if sim.poll() is None:
             sim.kill()
     if sim.returncode not in (0, None):
@@ -407,16 +408,24 @@ def _print_monitor_summary(summary: dict, out=sys.stdout) -> None:
     pipe = counters.get("pipeline") or {}
     if pipe.get("analysis_shed"):
         print(f"  analysis skipped {pipe['analysis_shed']} frames to keep up (all recorded)", file=out)
-    for a in summary["adequacy"]:
-        band = "-" if a["band"] is None else "%.2f .. %.2f rad/s" % tuple(a["band"])
-        print(f"  {a['output'] + '/' + a['input']:12s} adequate over {100 * a['fraction']:3.0f}% of the band ({band})", file=out)
+    from livesweep.monitor.text import test_point_line
+
+    tps = summary.get("test_points") or []
+    print(f"  test points: {len(tps)}" + ("" if tps else " (no sweep, SystemID run or marker seen)"), file=out)
+    for k, tp in enumerate(tps, 1):
+        print(f"    {test_point_line(k, tp)}", file=out)
     if summary["verdict"]:
-        print(f"  verdict: {summary['verdict']}" + (f" ({'; '.join(summary['reasons'])})" if summary["reasons"] else ""),
-              file=out)
+        print(f"  verdict: {summary['verdict']}", file=out)
     for line in summary.get("map_problems") or ():
         print(f"  map: {line}", file=out)
     if summary.get("recorded"):
-        print(f"  recorded {sum(summary['recorded'].values())} messages", file=out)
+        from livesweep.telemetry.recorder import RAW_TOPIC, RESULT_PREFIX
+
+        rec = summary["recorded"]
+        raw = rec.get(RAW_TOPIC, 0)
+        results = sum(n for t, n in rec.items() if t.startswith(RESULT_PREFIX + "/"))
+        print(f"  recorded {sum(rec.values())} messages: {sum(rec.values()) - raw - results} received"
+              + (f", {raw} datagrams as received" if raw else "") + f", {results} live results", file=out)
 
 
 def _read_signing_key(path: str | None) -> bytes | None:

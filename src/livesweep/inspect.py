@@ -229,7 +229,7 @@ class _Stats:
         from livesweep.monitor.vehicle import VehicleInfo
         from livesweep.telemetry.extract import compile_signal
 
-        self.topics: dict[str, list] = {}            # topic -> [n, first ns, last ns, first data]
+        self.topics: dict[str, list] = {}            # topic -> [n, earliest ns, latest ns, first data]
         self._vehicles: dict = {}                    # sysid -> VehicleInfo: the log's main system is judged
         self._frames_by_system: dict = {}            # sysid -> frames (the main system sends the most)
         self._new_vehicle = VehicleInfo
@@ -252,9 +252,12 @@ class _Stats:
         st = self.topics.get(topic)
         if st is None:
             self.topics[topic] = [1, t_ns, t_ns, data]
-        else:
+        else:                                    # the span: file order need not be time order
             st[0] += 1
-            st[2] = t_ns
+            if t_ns > st[2]:
+                st[2] = t_ns
+            elif t_ns < st[1]:
+                st[1] = t_ns
         if not isinstance(data, dict):
             return
         sysid = data.get("sysid")
@@ -464,6 +467,7 @@ def inspect_log(path, *, columns=None) -> LogInspection:
         raise ConfigError(f"{path}: no such file")
     fmt = sniff_format(path)
     notes: list[str] = []
+    summary_duration = 0.0
     maps = _candidate_maps()
     stats = _Stats(maps)
     import logging
@@ -481,6 +485,7 @@ def inspect_log(path, *, columns=None) -> LogInspection:
                 from livesweep.telemetry.mcap_log import read_summary
 
                 s = read_summary(path)
+                summary_duration = s.duration_s
                 if not s.complete:
                     notes.append(f"unfinished recording ({s.tail_error or 'no footer'}): `livesweep recover {path}` "
                                  "makes a finished copy")
@@ -491,7 +496,8 @@ def inspect_log(path, *, columns=None) -> LogInspection:
                                  + (" ..." if len(undecoded) > 8 else ""))
     finally:
         quiet.setLevel(level)
-    t0 = stats.t0 or 0
+    firsts = [st[1] for st in stats.topics.values()]
+    t0 = min(firsts) if firsts else 0            # file order is receive order, not always time order
     infos = []
     for topic, (n, first, last, sample) in sorted(stats.topics.items()):
         names = list(_numeric_fields(sample))[:MAX_FIELDS] if isinstance(sample, dict) else []
@@ -499,6 +505,8 @@ def inspect_log(path, *, columns=None) -> LogInspection:
         infos.append(TopicInfo(topic, n, _rate(n, first, last), (first - t0) / 1e9, (last - t0) / 1e9,
                                tuple((f, u.get(f, "")) for f in names)))
     duration = ((stats.t_end or t0) - t0) / 1e9
+    if fmt == "mcap" and not stats.topics:
+        duration = summary_duration                # nothing decoded (ROS 2 CDR): the file's own span
     fits = [f for name, m, whole in maps if (f := _fit(stats, name, m, whole)) is not None]
     fits.sort(key=lambda f: (not f.fits, -f.pairs / f.total, -f.pairs, f.name))
     live = []

@@ -15,9 +15,16 @@ Entity layout (every path below is relative to the recording root; Rerun shows i
     spectra/<out>_<in>/phase_deg       LineStrips2D, points (log10 omega, phase [deg])
     spectra/<out>_<in>/phase_deg/grid
     spectra/<out>_<in>/waterfall       Tensor (estimate x frequency bin) of gamma^2 in percent
+    focus/coherence, focus/magnitude_db, focus/phase_deg
+                                       the swept pair of the test point running (or the last one):
+                                       the responses its verdict judged, over its judged band, as the
+                                       spectra/ plots are drawn
     status/adequacy                    TextDocument (verdict, coherence kind, sweep, markdown table)
     status/adequacy_fraction           Scalars, one series per pair: adequate fraction of the band
-    status/sweep_frequency/<input>     Scalars: the input's current sweep frequency [rad/s]
+    status/sweep_frequency/<input>     Scalars: the input's current sweep frequency [rad/s] (the
+                                       injection's own schedule when the autopilot says it)
+    status/sweep_frequency/judged_band_low, .../judged_band_high
+                                       Scalars: the band the test point running is judged over [rad/s]
     status/time_remaining/<input>      Scalars: sweep time still needed to the band's top [s]
     status/test_points                 TextDocument: the test points (open one first, then the closed ones)
     status/alerts                      TextLog, level WARN
@@ -39,7 +46,8 @@ import rerun.blueprint as rrb
 
 __all__ = [
     "TIMELINE", "ADEQUACY_PATH", "ALERTS_PATH", "FRACTION_PATH", "TEST_POINTS_PATH", "SWEEP_FREQUENCY_PATH",
-    "TIME_REMAINING_PATH", "telemetry_path", "pair_path", "coherence_path", "magnitude_path", "phase_path",
+    "TIME_REMAINING_PATH", "FOCUS_PATH", "BAND_EDGE_PATHS", "telemetry_path", "pair_path", "coherence_path",
+    "magnitude_path", "phase_path",
     "waterfall_path", "sweep_frequency_path", "time_remaining_path", "pair_label", "check_names", "plot_box",
     "plot_margins", "PLOT_MARGINS", "default_blueprint",
 ]
@@ -51,6 +59,10 @@ FRACTION_PATH = "status/adequacy_fraction"
 TEST_POINTS_PATH = "status/test_points"
 SWEEP_FREQUENCY_PATH = "status/sweep_frequency"
 TIME_REMAINING_PATH = "status/time_remaining"
+#: The swept pair of the test point running (or the last one), as its verdict judged it.
+FOCUS_PATH = "focus"
+#: The edges of the band the running test point is judged over, drawn with the sweep frequency.
+BAND_EDGE_PATHS = (f"{SWEEP_FREQUENCY_PATH}/judged_band_low", f"{SWEEP_FREQUENCY_PATH}/judged_band_high")
 
 #: Display units around each frequency plot's box for its tick labels, (left, right, top, bottom),
 #: for one input column; with n inputs the columns are n times narrower, so the margins (which
@@ -164,6 +176,15 @@ def check_names(inputs: Sequence[str], outputs: Sequence[str]) -> None:
             paths[p] = (o, i)
 
 
+def _focus_view() -> rrb.Spatial2DView:
+    """The swept pair of the test point, as its verdict judged it (one column of plots)."""
+    return rrb.Spatial2DView(origin="/" + FOCUS_PATH,
+                             contents=["$origin/coherence/**", "$origin/magnitude_db/**", "$origin/phase_deg/**",
+                                       "$origin/title"],
+                             name="Test point: the swept pair as judged (γ², |H| [dB], phase [deg] vs ω [rad/s])",
+                             visual_bounds=_visual_bounds(1))
+
+
 def _pair_views(output: str, input: str, n_inputs: int) -> rrb.Vertical:  # noqa: A002
     """Two stacked views for one pair: coherence, |H| [dB] and phase [deg] against log omega in
     one view (aligned frequency axes), and the coherence waterfall."""
@@ -189,41 +210,49 @@ def default_blueprint(inputs: Sequence[str], outputs: Sequence[str], *,
                       history_s: float = 30.0) -> rrb.Blueprint:
     """The default layout of the live view. Pure: builds objects, logs nothing.
 
-    Three columns. Left: input and output time series (last ``history_s`` seconds of flight
-    time), the sweep frequency [rad/s] and the time still needed [s] per input, and the
-    adequate-fraction history. Middle: the status (verdict, coherence kind, sweep, adequacy
-    table), the test points and the alerts. Right: one tab per output, each with one column per
-    input holding that pair's coherence, Bode magnitude and phase against log frequency (one
-    view) and its coherence waterfall. The time panel starts collapsed (its time bar stays).
+    Two tabs. **Test point** (what the operator judges from), three columns: the verdict (with how
+    far behind the link the view is), the test points and the alerts; the swept pair of the test
+    point running or the last one, as its verdict judged it (coherence, Bode magnitude and phase
+    over the judged band), the sweep frequency against the band judged, and the adequate
+    fraction; the input and output time series (last ``history_s`` seconds of flight time) and the
+    sweep time still needed. **All pairs**: one tab per output, each with one column per input
+    holding that pair's sliding-window coherence, Bode magnitude and phase (one view) and its
+    coherence waterfall. The time panel starts collapsed (its time bar stays).
     """
     inputs, outputs = list(inputs), list(outputs)
     check_names(inputs, outputs)
     window = rrb.VisibleTimeRange(TIMELINE,
                                   start=rrb.TimeRangeBoundary.cursor_relative(seconds=-float(history_s)),
                                   end=rrb.TimeRangeBoundary.cursor_relative())
-    series = rrb.Vertical(
-        rrb.TimeSeriesView(origin="/telemetry/inputs", name="Inputs", time_ranges=window),
-        rrb.TimeSeriesView(origin="/telemetry/outputs", name="Outputs", time_ranges=window),
-        rrb.TimeSeriesView(origin="/" + SWEEP_FREQUENCY_PATH, name="Sweep frequency [rad/s]"),
-        rrb.TimeSeriesView(origin="/" + TIME_REMAINING_PATH, name="Sweep time to band top [s]"),
-        rrb.TimeSeriesView(origin="/" + FRACTION_PATH, name="Adequate fraction of band",
-                           axis_y=rrb.ScalarAxis(range=(0.0, 1.0))),
-        name="Time series",
-        row_shares=[1.0, 1.0, 0.7, 0.7, 0.7],
-    )
     status = rrb.Vertical(
-        rrb.TextDocumentView(origin="/" + ADEQUACY_PATH, name="Status and excitation adequacy"),
+        rrb.TextDocumentView(origin="/" + ADEQUACY_PATH, name="Verdict and status"),
         rrb.TextDocumentView(origin="/" + TEST_POINTS_PATH, name="Test points"),
         rrb.TextLogView(origin="/" + ALERTS_PATH, name="Alerts",
                         columns=rrb.TextLogColumns(text_log_columns=["LogLevel", "Body"])),
         name="Status",
-        row_shares=[1.3, 1.2, 0.6],
+        row_shares=[1.2, 1.3, 0.6],
+    )
+    focus = rrb.Vertical(
+        _focus_view(),
+        rrb.TimeSeriesView(origin="/" + SWEEP_FREQUENCY_PATH, name="Sweep frequency and the band judged [rad/s]"),
+        rrb.TimeSeriesView(origin="/" + FRACTION_PATH, name="Adequate fraction of band (sliding window)",
+                           axis_y=rrb.ScalarAxis(range=(0.0, 1.0))),
+        name="Swept axis",
+        row_shares=[3.0, 0.9, 0.8],
+    )
+    series = rrb.Vertical(
+        rrb.TimeSeriesView(origin="/telemetry/inputs", name="Inputs", time_ranges=window),
+        rrb.TimeSeriesView(origin="/telemetry/outputs", name="Outputs", time_ranges=window),
+        rrb.TimeSeriesView(origin="/" + TIME_REMAINING_PATH, name="Sweep time to band top [s]"),
+        name="Time series",
+        row_shares=[1.0, 1.0, 0.6],
     )
     n_in = max(1, len(inputs))
     tabs = [rrb.Horizontal(*[_pair_views(o, i, n_in) for i in inputs], name=o) for o in outputs]
-    right = rrb.Tabs(*tabs, name="Spectra by output") if tabs else rrb.Tabs(name="Spectra by output")
+    pairs = rrb.Tabs(*tabs, name="All pairs (sliding window)") if tabs else rrb.Tabs(name="All pairs (sliding window)")
+    main = rrb.Horizontal(status, focus, series, column_shares=[1.0, 1.25, 0.9], name="Test point")
     return rrb.Blueprint(
-        rrb.Horizontal(series, status, right, column_shares=[0.85, 1.0, 2.15]),
+        rrb.Tabs(main, pairs),
         rrb.TimePanel(timeline=TIMELINE, play_state="following", state="collapsed"),
         collapse_panels=True,
         auto_views=False,

@@ -127,6 +127,8 @@ class Ingest(threading.Thread):
         self._verdicts: dict[str, bool] = {}     # topic -> wanted (decided once per topic)
         self.drain_timeout_s = float(drain_timeout_s)
         self.received = 0          # frames read from the sources (all recorded, when recording)
+        self.received_recorded = 0  # of which from sources that recorded them (a recorder process: it
+                                    # forwards only what the analysis takes, and counts all it read)
         #: receive time [ns] of the latest frame from each system (``sysid``; None: frames without one)
         self.last_rx: dict = {}
         self._topics: set[str] = set()  # topics read so far (the first frame of each goes to the analysis)
@@ -157,6 +159,8 @@ class Ingest(threading.Thread):
         if self.recorder is not None and not recorded:
             self.recorder.record(frames)
         self.received += len(frames)
+        if recorded:
+            self.received_recorded += len(frames)
         last = self.last_rx
         for f in frames:
             d = f.data

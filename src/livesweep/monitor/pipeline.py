@@ -35,6 +35,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from livesweep.errors import ConfigError
+from livesweep.monitor.alerts import ALERT_INTERVAL_S, AlertGate
 from livesweep.monitor.ingest import FrameQueue, Ingest
 from livesweep.monitor.testpoints import CLOSE_WAIT_S, GRID_TOL, LOST_AFTER_S, LOST_TOPIC, SOURCES, TestPointTracker
 from livesweep.monitor.text import time_text
@@ -54,9 +55,10 @@ REPORT_EVERY_S = 1.0          # link counters recorded and checked for alerts th
 TIMESERIES_EVERY_S = 0.2      # time series go to the view in batches this often [s of wall time]: each Rerun
                               # call holds the interpreter, and one per 20 ms block slowed the recording thread
 QUEUE_LIMIT_FRAMES = 50_000   # frames waiting for the analysis at most (about 50 MB)
+ALL_PAIRS_EVERY = 5           # every pair's spectra go to the view every this many view updates (the heavy part)
 SWITCH_INTERVAL_S = 0.001     # the GIL changes hands at least this often while the monitor runs
 DIAGNOSE_AFTER_S = 5.0        # a map's signals that found nothing are named this long after the first frame [s of receive time]
-PACE_SPAN_S = 30.0            # the data's pace (data s per receive s) is measured over this much data [s]
+PACE_SPAN_S = 30.0            # the data's pace (data s per receive s) is measured over this much receive time [s]
 
 #: Counters whose growth is a ``link`` alert: (where, key, words).
 LINK_ANOMALIES = (
@@ -306,6 +308,8 @@ class MonitorPipeline:
         self._seen_gaps = self._seen_lost = 0
         self._invalid_fed = 0            # invalid samples fed to the estimator so far (data time, not block time)
         self._last_view_t = -math.inf
+        self._view_updates = 0
+        self._newest_rx: int | None = None            # receive time [ns] of the newest frame analysed
         self._t_first: float | None = None
         self._t_data: float | None = None             # newest data time analysed [s]
         self.last_status = None
@@ -319,6 +323,9 @@ class MonitorPipeline:
         self._t_start = time.monotonic()
         self._last_report = -math.inf
         self._seen_anomalies: dict[str, int] = {}
+        self._link_unsaid: dict[str, int] = {}         # link counters grown since the last link alert
+        self._link_said = -math.inf                     # wall time of the last link alert
+        self._alert_gate = AlertGate()
         self._seen_systems: set = set()
         self.alerts_raised = 0
         self.map_problems: list[str] | None = None    # signals that found nothing, once diagnosed
@@ -370,7 +377,7 @@ class MonitorPipeline:
                 for f in frames:
                     self._take(f)
                 self.totals.analysed += len(frames)
-                self.totals.frames = ingest.received
+                self.totals.frames = self._frames_received(ingest)
                 self.analysis_shed = queue.shed + self._sources_shed()
                 if frames and live and self._oldest_unlogged is None:
                     self._oldest_unlogged = frames[0].receive_ns
@@ -399,7 +406,7 @@ class MonitorPipeline:
             ingest.stop(drain=live)
             queue.close()
             ingest.join()
-            self.totals.frames = ingest.received
+            self.totals.frames = self._frames_received(ingest)
             self.analysis_shed = queue.shed + self._sources_shed()
             try:
                 while frames := queue.get(timeout_s=0):      # what the analysis had not taken yet
@@ -433,13 +440,14 @@ class MonitorPipeline:
             return
         if self._cause_rx is None:
             self._cause_rx = f.receive_ns            # the oldest frame whose effects are not shown yet
+        self._newest_rx = f.receive_ns
         before = self.aligner.k_frontier
         self.aligner.push(f)
         if self.aligner.k_frontier != before:
             self._rx_to_data = (f.receive_ns, self.aligner.frontier_s)
             hist = self._rx_history
             hist.append(self._rx_to_data)
-            while len(hist) > 2 and hist[-1][1] - hist[1][1] > PACE_SPAN_S:
+            while len(hist) > 2 and (hist[-1][0] - hist[1][0]) * 1e-9 > PACE_SPAN_S:
                 hist.popleft()
         if self.map_problems is None or self._map_missing:
             self._map_check(f.receive_ns)
@@ -462,6 +470,13 @@ class MonitorPipeline:
             self._drain_blocks()
             if records := self.test_points.expire(t):
                 self._test_point_records(records, log_time_ns=f.receive_ns)
+
+    def _frames_received(self, ingest: Ingest) -> int:
+        """Frames received from every source: a recorder process counts all it read (it forwards only
+        those the analysis takes)."""
+        own = sum(sum((src.counts.get("received") or {}).values()) for src in self.sources
+                  if getattr(src, "recorded", False))
+        return ingest.received - ingest.received_recorded + own
 
     def _sources_shed(self) -> int:
         """Frames a recorder process could not hand to the analysis (recorded all the same)."""
@@ -533,8 +548,8 @@ class MonitorPipeline:
     def _data_time(self, receive_ns: int) -> float | None:
         """The data time [s] of a frame without a usable stamp (a STATUSTEXT, a marker): the aligner's
         frontier when it last moved, plus the receive time since at the data's own pace (data seconds
-        per receive second over the last ``PACE_SPAN_S``: 1 live, N for a log streamed at N x), so a
-        SystemID text during a stretch without samples keeps its place."""
+        per receive second over the last ``PACE_SPAN_S`` of receive time: 1 live, N for a log
+        streamed at N x), so a SystemID text during a stretch without samples keeps its place."""
         if self._rx_to_data is None:
             return None
         rx, t = self._rx_to_data
@@ -556,10 +571,13 @@ class MonitorPipeline:
         at its own data time (so a replay changes the verdict where the live run did). A closed
         record is logged at ``log_time_ns`` (the receipt of the frame that decided it), else now."""
         for t_s, rec in records:
-            if rec["state"] == "ignored":
+            if rec["state"] in ("ignored", "superseded"):
+                if self.view is not None and hasattr(self.view, "log_test_point"):
+                    self.view.log_test_point(t_s, rec)          # gone from the view's table
                 continue
             if self.view is not None and hasattr(self.view, "log_test_point"):
                 self.view.log_test_point(t_s, rec)
+                self._show_focus(t_s, rec)
             if rec["state"] == "closed":
                 if self.recorder is not None:
                     self.recorder.record_result("test_point", rec, flush=True,
@@ -567,6 +585,15 @@ class MonitorPipeline:
                 if self.publisher is not None:
                     self.publisher.publish("test_point", rec)
             self._update_verdict(t_s, rec)
+
+    def _show_focus(self, t_s: float, rec: dict) -> None:
+        """The swept pair of a test point as its verdict judged it, in the view's "Test point" tab."""
+        j = self.test_points.judgements.get(rec["start_s"])
+        if j is None or not j.pairs or getattr(j.pairs[0], "response", None) is None or \
+                not hasattr(self.view, "log_focus"):
+            return
+        p = j.pairs[0]
+        self.view.log_focus(t_s, p.response, f"{p.output}/{p.input}: {j.label} ({j.progress()})")
 
     def _operator_verdict(self, rec: dict | None = None) -> tuple[str, tuple, dict | None]:
         """(verdict, reasons, the test point it is about): from the test point record just made, else
@@ -699,24 +726,67 @@ class MonitorPipeline:
                 for p in status.pairs]
         if self.view is not None and t_s - self._last_view_t >= self.s.view_period_s - 1e-9:
             self._last_view_t = t_s
+            self._view_updates += 1
+            sweep, band = self._sweep_now(t_s, status)
             self.view.log_estimate(t_s, frs.omega, list(frs.outputs), list(frs.inputs), frs.coherence, mag, phase,
-                                   rows, self.verdict or "WAIT", list(self.verdict_reasons),
-                                   coherence_kind=coherence_kind,
-                                   sweep={i: (status.sweep_frequency_rad_s.get(i), status.time_remaining_s.get(i))
-                                          for i in self.s.inputs})
-            if status.alerts:
-                self.view.log_alerts(t_s, [(a.kind, a.message) for a in status.alerts])
+                                   [r for r, p in zip(rows, status.pairs) if p.required],
+                                   self.verdict or "WAIT", list(self.verdict_reasons),
+                                   coherence_kind=coherence_kind, sweep=sweep, band_rad_s=band,
+                                   spectra=(self._view_updates - 1) % ALL_PAIRS_EVERY == 0,
+                                   lag_s=self._lag_s())
             if self._oldest_unlogged is not None:     # receipt of the oldest frame this estimate includes
                 self.totals.latency_s.append((receive_ns() - self._oldest_unlogged) * 1e-9)
                 self._oldest_unlogged = None
+        for a in self._said(t_s, status.alerts):
+            self._record_alert(t_s, a)
+            if self.view is not None:
+                self.view.log_alerts(t_s, [(a.kind, a.message)])
+            if self.publisher is not None:
+                self.publisher.publish("alert", {"t_s": t_s, "kind": a.kind, "message": a.message})
         payload = self._payload(est, rows)
         if self.publisher is not None:
             self.publisher.publish("estimate", payload)
         if self.recorder is not None:
-            for a in status.alerts:
-                self._record_alert(t_s, a)
             if self.totals.estimates % max(1, self.s.results_every) == 0:
                 self.recorder.record_result("estimate", payload, log_time_ns=receive_ns())
+
+    def _said(self, t_s: float, alerts) -> list:
+        """The sliding window's alerts an operator should read now: not the expected effects of a
+        sweep (while a test point runs, the other inputs move with the swept one: the controller's
+        reaction, not a second input), each subject at most every ``ALERT_INTERVAL_S`` of data time."""
+        running = self.test_points.current is not None
+        out = []
+        for a in alerts:
+            if running and a.kind == "input_correlation":
+                continue
+            if (a := self._alert_gate.admit(t_s, a)) is not None:
+                out.append(a)
+        return out
+
+    def _lag_s(self) -> float | None:
+        """How far the analysis is behind the link [s]: now minus the receipt of the newest frame it
+        took (live only: a replay's receive times are the recording's)."""
+        if not self._live or self._newest_rx is None:
+            return None
+        return max((receive_ns() - self._newest_rx) * 1e-9, 0.0)
+
+    def _sweep_now(self, t_s: float, status) -> tuple[dict, tuple | None]:
+        """Per input (sweep frequency [rad/s], time to the band top [s]) and the band the running test
+        point is judged over: the injection's own schedule when the autopilot said what it injects
+        (a closed-loop input's zero crossings would say less), else the input's tracked sweep."""
+        sweep = {i: (status.sweep_frequency_rad_s.get(i), status.time_remaining_s.get(i)) for i in self.s.inputs}
+        cur = self.test_points.current
+        if cur is None:
+            return sweep, None
+        if cur.swept_input in sweep:                 # the other inputs are the controller's reaction
+            sweep = {i: v if i == cur.swept_input else (None, None) for i, v in sweep.items()}
+        inj = cur.injection
+        if inj is None:
+            return sweep, self.s.band_rad_s
+        elapsed = t_s - cur.start_s
+        if cur.swept_input in sweep and inj.delay_s < elapsed < inj.duration_s:
+            sweep[cur.swept_input] = (float(inj.omega_at(elapsed)), inj.duration_s - elapsed)
+        return sweep, inj.band_rad_s
 
     def _record_alert(self, t_s: float | None, alert: Alert, log_time_ns: int | None = None) -> None:
         self.alerts_raised += 1
@@ -767,10 +837,13 @@ class MonitorPipeline:
         self._seen_systems |= systems
         words = {key: w for _, key, w in LINK_ANOMALIES}
         alerts = []
-        if grew:
-            text = ", ".join(f"{n} {words[k]}" for k, n in grew.items())
-            alerts.append(Alert("link", f"link: {text} in the last {REPORT_EVERY_S:g} s (counted, see the summary)",
-                                float(sum(grew.values()))))
+        for k, n in grew.items():                 # said at most every ALERT_INTERVAL_S, with all that grew since
+            self._link_unsaid[k] = self._link_unsaid.get(k, 0) + n
+        if self._link_unsaid and (final or now - self._link_said >= ALERT_INTERVAL_S):
+            text = ", ".join(f"{n} {words[k]}" for k, n in self._link_unsaid.items())
+            alerts.append(Alert("link", f"link: {text} in the last {min(now - self._link_said, now - self._t_start):.0f} s "
+                                "(counted, see the summary)", float(sum(self._link_unsaid.values()))))
+            self._link_unsaid, self._link_said = {}, now
         if new_systems:
             alerts.append(Alert("link", f"link: another system on the link (system id {', '.join(new_systems)}): "
                                 "recorded, but only the first system of each message type is analysed",
@@ -778,7 +851,7 @@ class MonitorPipeline:
         for a in alerts:
             self._record_alert(self._t_data, a)
             if self.view is not None:
-                self.view.log_alerts(self._t_data if self._t_data is not None else 0.0, [(a.kind, a.message)])
+                self.view.log_alerts(self._t_data, [(a.kind, a.message)])
             if self.publisher is not None:
                 self.publisher.publish("alert", {"t_s": self._t_data, "kind": a.kind, "message": a.message})
         if self.status_line is not None:
@@ -837,7 +910,7 @@ class MonitorPipeline:
         a = Alert("map", line, 1.0)
         self._record_alert(self._t_data, a, log_time_ns=receive_ns)
         if self.view is not None:
-            self.view.log_alerts(self._t_data if self._t_data is not None else 0.0, [(a.kind, a.message)])
+            self.view.log_alerts(self._t_data, [(a.kind, a.message)])
         if self.publisher is not None:
             self.publisher.publish("alert", {"t_s": self._t_data, "kind": a.kind, "message": a.message})
 
@@ -919,14 +992,17 @@ class MonitorPipeline:
         last = self.last_status
         lat = np.asarray(self.totals.latency_s)
         return {
-            "frames": self.totals.frames, "blocks": self.totals.blocks, "estimates": self.totals.estimates,
+            "frames": self.totals.frames if self._ingest is None else self._frames_received(self._ingest),
+            "blocks": self.totals.blocks, "estimates": self.totals.estimates,
             "wall_s": round(self.totals.wall_s, 3),
             "data_s": None if self._next_tick is None else round(self._next_tick - self.s.update_period_s - self._t_first, 3),
             "aligner": dict(self.aligner.counts),
             "sources": [src.counts for src in self.sources],
             "counters": self.counters(),
             "alerts_recorded": self.alerts_raised,
-            "map_problems": list(self.map_problems or ()),
+            # the map's problems that still stand (a signal found later is not a problem any more)
+            "map_problems": [line for line in (self.map_problems or ())
+                             if any(line.startswith(f"signal {n}:") for n in self._map_missing)],
             "recorded": None if self.recorder is None else dict(self.recorder.message_counts),
             "verdict": self.verdict,
             "reasons": list(self.verdict_reasons),

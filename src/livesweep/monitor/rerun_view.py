@@ -72,10 +72,9 @@ import rerun as rr
 from rerun.encodings.tensor_data_ext import DTYPE_MAP
 
 from livesweep.monitor.blueprint import (
-    ADEQUACY_PATH, ALERTS_PATH, FRACTION_PATH, TEST_POINTS_PATH, TIMELINE, check_names,
-    coherence_path, default_blueprint, magnitude_path, pair_label, phase_path, plot_box, plot_margins,
-    sweep_frequency_path,
-    telemetry_path, time_remaining_path, waterfall_path,
+    ADEQUACY_PATH, ALERTS_PATH, BAND_EDGE_PATHS, FOCUS_PATH, FRACTION_PATH, TEST_POINTS_PATH, TIMELINE, check_names,
+    default_blueprint, pair_label, pair_path, plot_box, plot_margins, sweep_frequency_path, telemetry_path,
+    time_remaining_path, waterfall_path,
 )
 from livesweep.monitor.freq_plot import (
     MAG_STEPS_DB, PHASE_STEPS_DEG, frequency_extent, log_ticks, masked_runs, reference_phase, tick_label,
@@ -95,6 +94,7 @@ _MASKED_COLOR = (125, 125, 125, 200)
 _THRESHOLD_COLOR = (255, 165, 0)
 _GRID_COLOR = (150, 150, 150, 120)
 _GRID_MINOR_COLOR = (150, 150, 150, 45)
+_TITLE_COLOR = (40, 40, 40)
 #: Line radii [ui points; Rerun encodes ui points as negative radii] of coherent and masked stretches.
 _CURVE_RADIUS = -1.5
 _MASKED_RADIUS = -0.6
@@ -322,28 +322,32 @@ def _rgba(c) -> int:
 class _Plot:
     """One frequency plot of one pair (coherence, magnitude or phase): its path and what is on screen."""
 
-    __slots__ = ("path", "kind", "unit", "steps", "color", "box", "extent", "grid_key")
+    __slots__ = ("path", "kind", "unit", "steps", "color", "box", "extent", "grid_key", "margins")
 
-    def __init__(self, path: str, kind: str, unit: str, steps: Sequence[float], color: tuple, box: tuple) -> None:
+    def __init__(self, path: str, kind: str, unit: str, steps: Sequence[float], color: tuple, box: tuple,
+                 margins: tuple) -> None:
         self.path, self.kind, self.unit, self.steps, self.color, self.box = path, kind, unit, steps, color, box
+        self.margins = margins                # (left, right, top, bottom) display units for the labels
         self.extent: tuple | None = None     # (y0, y1, step) plotted
         # box = (x, y, width, height) in the pair view's display units (blueprint.plot_box)
         self.grid_key: tuple | None = None   # what the logged transform and grid were made for
 
 
 class _PairState:
-    """What the view remembers about one output/input pair."""
+    """What the view remembers about one pair's plots under ``root`` (``spectra/<out>_<in>``, or
+    ``focus``), drawn in a view of ``n_columns`` columns of plots."""
 
     __slots__ = ("coh", "mag", "phase", "wf_path", "waterfall", "wf_count")
 
-    def __init__(self, o: str, i: str, n_inputs: int) -> None:
-        self.coh = _Plot(coherence_path(o, i), "coherence", "γ²", (0.2,), _COH_COLOR, plot_box("coherence", n_inputs))
-        self.mag = _Plot(magnitude_path(o, i), "magnitude", "dB", MAG_STEPS_DB, _MAG_COLOR,
-                         plot_box("magnitude", n_inputs))
-        self.phase = _Plot(phase_path(o, i), "phase", "deg", PHASE_STEPS_DEG, _PHASE_COLOR,
-                           plot_box("phase", n_inputs))
+    def __init__(self, root: str, n_columns: int, wf_path: str | None = None) -> None:
+        m = plot_margins(n_columns)
+        self.coh = _Plot(f"{root}/coherence", "coherence", "γ²", (0.2,), _COH_COLOR, plot_box("coherence", n_columns), m)
+        self.mag = _Plot(f"{root}/magnitude_db", "magnitude", "dB", MAG_STEPS_DB, _MAG_COLOR,
+                         plot_box("magnitude", n_columns), m)
+        self.phase = _Plot(f"{root}/phase_deg", "phase", "deg", PHASE_STEPS_DEG, _PHASE_COLOR,
+                           plot_box("phase", n_columns), m)
         self.coh.extent = (0.0, 1.0, 0.2)
-        self.wf_path = waterfall_path(o, i)
+        self.wf_path = wf_path
         self.waterfall: np.ndarray | None = None   # (k, n_f) uint8, never mutated once logged
         self.wf_count = 0
 
@@ -408,6 +412,9 @@ class RerunView:
         self._test_points: dict[tuple, tuple[int, dict]] = {}   # (start_s, swept_input) -> (number, record)
         self._n_test_points = 0
         self._epoch: bool | None = None       # flight_time as a UNIX timestamp (decided by the first time)
+        self._focus: _PairState | None = None  # the swept pair of the test point (focus/)
+        self._early_alerts: list = []          # alerts before any flight time: logged at the first one
+        self._band_named = False
 
         self.rec = rr.RecordingStream(application_id, recording_id=recording_id)
         self.rec.set_log_time_enabled(False)   # flight_time is the only timeline: replay == live
@@ -454,10 +461,7 @@ class RerunView:
             self._ensure_series(telemetry_path("input", name), name)
         for name in self.outputs:
             self._ensure_series(telemetry_path("output", name), name)
-        self._fraction_pairs = [(o, i) for o in self.outputs for i in self.inputs]
-        if self._fraction_pairs:
-            self.rec.log(FRACTION_PATH, rr.SeriesLines(names=[pair_label(o, i) for o, i in self._fraction_pairs]),
-                         static=True)
+        self._fraction_pairs: list = []        # the pairs of the adequacy rows (series names logged for them)
         for o in self.outputs:
             for i in self.inputs:
                 self._pair(o, i)
@@ -477,13 +481,17 @@ class RerunView:
     def _pair(self, o: str, i: str) -> _PairState:
         st = self._pairs.get((o, i))
         if st is None:
-            st = self._pairs[(o, i)] = _PairState(o, i, len(self.inputs))
-            for p in (st.coh, st.mag, st.phase):
-                self.rec.log(p.path, rr.LineStrips2D.from_fields(draw_order=20.0), static=True)
-            self.rec.log(st.coh.path, rr.Points2D.from_fields(radii=rr.Radius.ui_points(2.0), draw_order=21.0),
-                         static=True)
-            if self.waterfall_rows:
-                self.rec.log(st.wf_path, rr.Tensor.from_fields(value_range=(0.0, 100.0)), static=True)
+            st = self._pairs[(o, i)] = self._new_pair(pair_path(o, i), len(self.inputs), waterfall_path(o, i))
+        return st
+
+    def _new_pair(self, root: str, n_columns: int, wf_path: str | None) -> _PairState:
+        st = _PairState(root, n_columns, wf_path if self.waterfall_rows else None)
+        for p in (st.coh, st.mag, st.phase):
+            self.rec.log(p.path, rr.LineStrips2D.from_fields(draw_order=20.0), static=True)
+        self.rec.log(st.coh.path, rr.Points2D.from_fields(radii=rr.Radius.ui_points(2.0), draw_order=21.0),
+                     static=True)
+        if st.wf_path is not None:
+            self.rec.log(st.wf_path, rr.Tensor.from_fields(value_range=(0.0, 100.0)), static=True)
         return st
 
     def _grid_batches(self, omega: np.ndarray) -> dict:
@@ -519,7 +527,7 @@ class RerunView:
         bx, by, w, h = plot.box
         sx, sy = w / (x1 - x0), h / (y1 - y0)
         self.rec.log(plot.path, rr.Transform3D(translation=[bx - x0 * sx, by + y1 * sy, 0.0], scale=[sx, -sy, 1.0]))
-        left, _, top, bottom = plot_margins(len(self.inputs))
+        left, _, top, bottom = plot.margins
         below, beside, above = y0 - 0.4 * bottom / sy, x0 - 0.5 * left / sx, y1 + 0.6 * top / sy
         major, minor, pts, labels = [], [], [], []
         ticks = log_ticks(x0, x1)
@@ -581,6 +589,10 @@ class RerunView:
             self.rec.set_time(TIMELINE, timestamp=np.datetime64(int(_ns(t)), "ns"))
         else:
             self.rec.set_time(TIMELINE, duration=np.timedelta64(int(_ns(t)), "ns"))
+        if self._early_alerts:
+            early, self._early_alerts = self._early_alerts, []
+            for kind, message in early:
+                self.rec.log(ALERTS_PATH, rr.TextLog(f"[{kind}] {message}", level=rr.TextLogLevel.WARN))
 
     # ---------------------------------------------------------------- public API
 
@@ -632,7 +644,8 @@ class RerunView:
     def log_estimate(self, t_s: float, omega: np.ndarray, outputs: Sequence[str], inputs: Sequence[str],
                      coherence: np.ndarray, magnitude_db: np.ndarray, phase_deg: np.ndarray,
                      adequacy_rows: Sequence[dict], verdict: str, reasons: Sequence[str], *,
-                     coherence_kind: str = "ordinary", sweep: dict | None = None) -> None:
+                     coherence_kind: str = "ordinary", sweep: dict | None = None, spectra: bool = True,
+                     band_rad_s: tuple | None = None, lag_s: float | None = None) -> None:
         """One spectral estimate at flight time ``t_s`` [s].
 
         Parameters
@@ -657,6 +670,15 @@ class RerunView:
             ``{input: (omega [rad/s] or None, time remaining [s] or None)}``: the sweep frequency
             and the sweep time still needed to reach the band's top, logged as scalars (NaN when
             None) and written in the status text.
+        spectra : bool
+            Draw every pair's frequency plots and waterfall (the "All pairs" tab); False: only the
+            status, fractions and sweep (a web viewer that must keep up gets the heavy part less often).
+        band_rad_s : (float, float), optional
+            The band the running test point is judged over [rad/s], drawn with the sweep frequency
+            (NaN when None).
+        lag_s : float, optional
+            How far behind the link this estimate is [s] (receive time of the newest frame in it to
+            now), said in the status text.
         """
         with self._lock:
             self._check_open()
@@ -672,65 +694,18 @@ class RerunView:
                 if a.shape != shape:
                     raise ValueError(f"{what} must have shape (n_outputs, n_inputs, n_f) = {shape}, got {a.shape}")
                 arrays.append(a)
-            coh, mag, pha = arrays
             sweep = {str(k): _sweep_pair(k, v) for k, v in (sweep or {}).items()}
             self._set_time(t_s)
-            g = self._grid_batches(w)
-            logw, x_range = g["logw"], g["x"]
-            coherent = np.isfinite(coh) & (coh >= MIN_COHERENCE)
-            pha = reference_phase(pha, coherent)
-            mag_rng = _data_range(mag, coherent)
-            pha_rng = _data_range(pha, coherent)
-            wf_pct = None
-            if self.waterfall_rows:
-                wf_pct = np.clip(np.rint(np.nan_to_num(coh, nan=0.0) * 100.0), 0, 100).astype(np.uint8)
-            n_f = w.size
-            DCB = rr.DescribedComponentBatch
             rec = self.rec
-            kind_batch = DCB(_Arrow(pa.array([coherence_kind], pa.string())), self._d_coh_kind)
-            coh_label = "γ² " + coherence_kind
-            for io, o in enumerate(outputs):
-                for ii, i in enumerate(inputs):
-                    st = self._pair(o, i)
-                    ok = coherent[io, ii]
-                    # coherence: line + points, exact values and their kind alongside
-                    c = coh[io, ii]
-                    fin = np.isfinite(c)
-                    pos = np.empty((int(fin.sum()), 2), np.float32)
-                    pos[:, 0] = logw[fin]
-                    pos[:, 1] = c[fin]
-                    pcol = np.where(ok[fin], _rgba(_COH_COLOR), _rgba(_MASKED_COLOR)).astype(np.uint32)
-                    points = pa.FixedSizeListArray.from_arrays(pa.array(pos.ravel()), type=_POINT_T)
-                    self._log_frame(st.coh, x_range, coh_label)
-                    self._log_curve(st.coh, logw, c, ok, [
-                        DCB(_Arrow(points), self._d_points), DCB(_Arrow(pa.array(pcol)), self._d_point_colors),
-                        DCB(_Arrow(pa.array(c)), self._d_coh_values), kind_batch])
-                    for plot, y, rng, label in ((st.mag, mag, mag_rng, "|H| dB"), (st.phase, pha, pha_rng, "phase deg")):
-                        lo, hi = rng[0][io, ii], rng[1][io, ii]
-                        plot.extent = value_extent(plot.extent, float(lo), float(hi), plot.steps)
-                        if plot.extent is None:
-                            continue      # nothing finite yet: nothing to draw
-                        self._log_frame(plot, x_range, label)
-                        self._log_curve(plot, logw, y[io, ii], ok)
-                    if wf_pct is not None:
-                        row = wf_pct[io, ii][None, :]
-                        old = st.waterfall
-                        if old is None or old.shape[1] != n_f:
-                            new = row.copy()
-                        else:
-                            keep = old[len(old) - (self.waterfall_rows - 1):] if self.waterfall_rows > 1 else old[:0]
-                            new = np.concatenate([keep, row])
-                        st.waterfall = new   # a new array every time: the logged one is never mutated
-                        st.wf_count += 1
-                        if st.wf_count == 1 or st.wf_count % self.waterfall_every == 0:
-                            rec.log(st.wf_path, [DCB(_Arrow(_tensor_array(new, g["dims"])), self._d_tensor)])
-            if self._fraction_pairs:
-                idx = {p: k for k, p in enumerate(self._fraction_pairs)}
-                frac = np.full(len(self._fraction_pairs), np.nan)
-                for r in adequacy_rows:
-                    k = idx.get((r.get("output"), r.get("input")))
-                    if k is not None and r.get("fraction") is not None:
-                        frac[k] = float(r["fraction"])
+            if spectra:
+                self._draw_pairs(w, outputs, inputs, *arrays, coherence_kind)
+            pairs = [(r.get("output"), r.get("input")) for r in adequacy_rows]
+            if pairs and pairs != self._fraction_pairs:
+                self._fraction_pairs = pairs
+                rec.log(FRACTION_PATH, rr.SeriesLines(names=[pair_label(o, i) for o, i in pairs]), static=True)
+            if pairs:
+                frac = np.array([np.nan if r.get("fraction") is None else float(r["fraction"])
+                                 for r in adequacy_rows])
                 rec.log(FRACTION_PATH, rr.Scalars(frac))
             for name, (f_rad_s, remaining_s) in sweep.items():
                 if name not in self._sweep_inputs:
@@ -739,9 +714,95 @@ class RerunView:
                     rec.log(time_remaining_path(name), rr.SeriesLines(names=f"{name} [s]"), static=True)
                 rec.log(sweep_frequency_path(name), rr.Scalars(np.nan if f_rad_s is None else f_rad_s))
                 rec.log(time_remaining_path(name), rr.Scalars(np.nan if remaining_s is None else remaining_s))
+            if not self._band_named:
+                self._band_named = True
+                for path, name in zip(BAND_EDGE_PATHS, ("band judged: bottom", "band judged: top")):
+                    rec.log(path, rr.SeriesLines(names=name, colors=[_GRID_COLOR]), static=True)
+            for path, edge in zip(BAND_EDGE_PATHS, band_rad_s or (None, None)):
+                rec.log(path, rr.Scalars(np.nan if edge is None else float(edge)))
             rec.log(ADEQUACY_PATH, rr.TextDocument(
-                adequacy_markdown(t_s, adequacy_rows, verdict, reasons, coherence_kind=coherence_kind, sweep=sweep),
+                adequacy_markdown(t_s, adequacy_rows, verdict, reasons, coherence_kind=coherence_kind, sweep=sweep,
+                                  lag_s=lag_s),
                 media_type=rr.MediaType.MARKDOWN))
+
+    def _draw_pairs(self, w: np.ndarray, outputs: list, inputs: list, coh: np.ndarray, mag: np.ndarray,
+                    pha: np.ndarray, coherence_kind: str) -> None:
+        """Every pair's frequency plots and waterfall (the "All pairs" tab)."""
+        g = self._grid_batches(w)
+        coherent = np.isfinite(coh) & (coh >= MIN_COHERENCE)
+        pha = reference_phase(pha, coherent)
+        wf_pct = None
+        if self.waterfall_rows:
+            wf_pct = np.clip(np.rint(np.nan_to_num(coh, nan=0.0) * 100.0), 0, 100).astype(np.uint8)
+        for io, o in enumerate(outputs):
+            for ii, i in enumerate(inputs):
+                st = self._pair(o, i)
+                self._draw_pair(st, g, coh[io, ii], mag[io, ii], pha[io, ii], coherent[io, ii], coherence_kind)
+                if wf_pct is not None:
+                    row = wf_pct[io, ii][None, :]
+                    old = st.waterfall
+                    if old is None or old.shape[1] != w.size:
+                        new = row.copy()
+                    else:
+                        keep = old[len(old) - (self.waterfall_rows - 1):] if self.waterfall_rows > 1 else old[:0]
+                        new = np.concatenate([keep, row])
+                    st.waterfall = new   # a new array every time: the logged one is never mutated
+                    st.wf_count += 1
+                    if st.wf_count == 1 or st.wf_count % self.waterfall_every == 0:
+                        self.rec.log(st.wf_path, [rr.DescribedComponentBatch(_Arrow(_tensor_array(new, g["dims"])),
+                                                                              self._d_tensor)])
+
+    def _draw_pair(self, st: _PairState, g: dict, c: np.ndarray, mag: np.ndarray, pha: np.ndarray,
+                   ok: np.ndarray, coherence_kind: str) -> None:
+        """One pair's three plots on the frequency grid ``g`` (:meth:`_grid_batches`); ``pha`` already
+        referenced (:func:`reference_phase`), ``ok`` where gamma^2 >= the threshold."""
+        DCB = rr.DescribedComponentBatch
+        logw, x_range = g["logw"], g["x"]
+        fin = np.isfinite(c)
+        pos = np.empty((int(fin.sum()), 2), np.float32)
+        pos[:, 0] = logw[fin]
+        pos[:, 1] = c[fin]
+        pcol = np.where(ok[fin], _rgba(_COH_COLOR), _rgba(_MASKED_COLOR)).astype(np.uint32)
+        points = pa.FixedSizeListArray.from_arrays(pa.array(pos.ravel()), type=_POINT_T)
+        self._log_frame(st.coh, x_range, "γ² " + coherence_kind)
+        self._log_curve(st.coh, logw, c, ok, [
+            DCB(_Arrow(points), self._d_points), DCB(_Arrow(pa.array(pcol)), self._d_point_colors),
+            DCB(_Arrow(pa.array(c)), self._d_coh_values),
+            DCB(_Arrow(pa.array([coherence_kind], pa.string())), self._d_coh_kind)])
+        for plot, y, label in ((st.mag, mag, "|H| dB"), (st.phase, pha, "phase deg")):
+            lo, hi = _curve_range(y, ok, turns=plot is st.phase)
+            plot.extent = value_extent(plot.extent, lo, hi, plot.steps)
+            if plot.extent is None:
+                continue      # nothing finite yet: nothing to draw
+            self._log_frame(plot, x_range, label)
+            self._log_curve(plot, logw, y, ok)
+
+    def log_focus(self, t_s: float, response, title: str) -> None:
+        """The swept pair of a test point as its verdict judged it, over the judged band (the "Test
+        point" tab's plots): ``response`` a :class:`~livesweep.spectral.response.FrequencyResponse`
+        (its coherence, |H| and phase), ``title`` what it is ("TP 2 p/roll: GO so far")."""
+        with self._lock:
+            self._check_open()
+            w = np.asarray(response.omega, float)
+            if w.size < 2:
+                return
+            if self._focus is None:
+                self._focus = self._new_pair(FOCUS_PATH, 1, None)
+            self._set_time(t_s)
+            c = np.asarray(response.coherence, float)
+            H = np.asarray(response.H, complex)
+            ok = np.isfinite(c) & (c >= MIN_COHERENCE)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                mag = 20.0 * np.log10(np.abs(H))
+            pha = reference_phase(np.degrees(np.angle(H)), ok)
+            kind = "partial" if getattr(response, "conditioned", False) else "ordinary"
+            x0, x1 = frequency_extent(w)
+            self._draw_pair(self._focus, {"logw": np.log10(w), "x": (x0, x1)}, c, mag, pha, ok, kind)
+            _, _, top, _ = self._focus.coh.margins
+            bx, by, bw, _ = self._focus.coh.box          # centred above the coherence plot
+            self.rec.log(f"{FOCUS_PATH}/title", rr.Points2D([[bx + 0.5 * bw, by - 0.7 * top]], labels=[title],
+                                                            show_labels=True, radii=rr.Radius.ui_points(0.5),
+                                                            colors=[_TITLE_COLOR]))
 
     def log_test_point(self, t_s: float, tp: dict) -> None:
         """A test point opened, was judged, or closed: the test-point document at flight time ``t_s`` [s].
@@ -766,13 +827,16 @@ class RerunView:
             self._check_open()
             if not isinstance(tp, dict):
                 raise TypeError(f"tp must be a dict (the /livesweep/test_point record), got {type(tp).__name__}")
-            key = (tp.get("start_s"), tp.get("swept_input"))
-            if key in self._test_points:
-                number = self._test_points[key][0]
+            key = tp.get("start_s")                  # one test point, whatever its record learns later
+            if tp.get("state") in ("ignored", "superseded"):
+                self._test_points.pop(key, None)     # not a test point after all: no phantom stays
             else:
-                self._n_test_points += 1
-                number = self._n_test_points
-            self._test_points[key] = (number, dict(tp))
+                if key in self._test_points:
+                    number = self._test_points[key][0]
+                else:
+                    self._n_test_points += 1
+                    number = self._n_test_points
+                self._test_points[key] = (number, dict(tp))
             closed = [k for k, (_, r) in self._test_points.items() if r.get("state") != "open"]
             for k in closed[:max(0, len(closed) - self.test_point_history)]:
                 del self._test_points[k]
@@ -782,12 +846,17 @@ class RerunView:
             self.rec.log(TEST_POINTS_PATH, rr.TextDocument(markdown_test_points(entries, t_s),
                                                            media_type=rr.MediaType.MARKDOWN))
 
-    def log_alerts(self, t_s: float, alerts: Sequence[tuple[str, str]]) -> None:
-        """Alerts as WARN text-log lines ``"[kind] message"`` at flight time ``t_s``."""
+    def log_alerts(self, t_s: float | None, alerts: Sequence[tuple[str, str]]) -> None:
+        """Alerts as WARN text-log lines ``"[kind] message"`` at flight time ``t_s``; alerts before
+        any data (``t_s`` None) wait for the first flight time (a placeholder time would decide the
+        timeline's type wrongly: a duration where the data's clock is the UTC one)."""
         with self._lock:
             self._check_open()
             alerts = list(alerts)
             if not alerts:
+                return
+            if t_s is None or not math.isfinite(float(t_s)):
+                self._early_alerts.extend(alerts)
                 return
             self._set_time(t_s)
             for kind, message in alerts:
@@ -839,13 +908,20 @@ def _sweep_pair(name, v) -> tuple[float | None, float | None]:
     return f, rem
 
 
-def _data_range(y: np.ndarray, coherent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per curve (last axis): the range of its coherent finite values, or of all its finite values
-    when fewer than two are coherent; +-inf where nothing is finite."""
+def _curve_range(y: np.ndarray, coherent: np.ndarray, *, turns: bool = False) -> tuple[float, float]:
+    """The range one curve needs: its coherent finite values, or all its finite values when fewer
+    than two are coherent; (inf, -inf) when nothing is finite. With ``turns`` (a phase), at most
+    two turns about the median of those values: a phase that walks through many turns where the
+    pair is barely coherent must not squeeze the curve the operator reads into a sliver."""
     fin = np.isfinite(y)
     use = fin & coherent
-    few = use.sum(axis=-1) < 2
-    use = np.where(few[..., None], fin, use)
-    lo = np.min(y, axis=-1, initial=np.inf, where=use)
-    hi = np.max(y, axis=-1, initial=-np.inf, where=use)
+    if use.sum() < 2:
+        use = fin
+    if not use.any():
+        return math.inf, -math.inf
+    v = y[use]
+    lo, hi = float(v.min()), float(v.max())
+    if turns and hi - lo > 720.0:
+        mid = float(np.median(v))
+        lo, hi = max(lo, mid - 360.0), min(hi, mid + 360.0)
     return lo, hi

@@ -325,6 +325,8 @@ class TestPointTracker:
         self._modes: dict = {}                       # (topic, sysid) -> last mode
         self._last_end: float | None = None          # end of the last test point [s]
         self.ignored = 0                             # detected activity shorter than a test point
+        #: the latest judgement of each recent test point, by its record's ``start_s`` (what a view draws)
+        self.judgements: dict = {}
 
     # -- what it watches ------------------------------------------------------------------------
     def wants(self, topic: str) -> bool:
@@ -424,10 +426,13 @@ class TestPointTracker:
                 self.closing.append(cur)
                 self.current = None
             return []
+        out = []
         if ev.source != "sweep":
             if not self.explicit and self.current is not None and self.current.source == "sweep" \
                     and ev.action == "start":
-                self.current = None          # an explicit event supersedes sweep detection from now on
+                # an explicit event supersedes sweep detection from now on: the detected one is dropped
+                out.append((ev.t_s, {**self.current.record("open"), "state": "superseded"}))
+                self.current = None
             self.explicit = True
         elif self.explicit:
             return []
@@ -437,7 +442,7 @@ class TestPointTracker:
                 cur.end_s, cur.end_note = max(ev.t_s, cur.start_s), ev.note
                 self.closing.append(cur)
                 self.current = None
-            return []
+            return out
         if cur is not None:
             if cur.start_s >= ev.t_s - 2.0:
                 # the same start seen twice (a STATUSTEXT and a mode change, MSG and SIDS): keep the
@@ -450,10 +455,10 @@ class TestPointTracker:
                     cur.unjudged = self._unjudged(ev)
                 if ev.injection is not None and (cur.injection is None or ev.injection.source == "SIDS"):
                     cur.injection = ev.injection
-                return [(ev.t_s, cur.record("open"))]
+                return out + [(ev.t_s, cur.record("open"))]
             cur.end_s, cur.end_note = ev.t_s, f"a new test point started ({ev.note})"
             self.closing.append(cur)
-        return self._open(ev)
+        return out + self._open(ev)
 
     def _unjudged(self, ev: TestPointEvent) -> str:
         """Why an autopilot start cannot be judged with this map ('' when it can)."""
@@ -590,3 +595,6 @@ class TestPointTracker:
             tp.judgement = j
         else:
             tp.running = j
+        self.judgements[round(tp.start_s, 6)] = j
+        while len(self.judgements) > 10:
+            self.judgements.pop(next(iter(self.judgements)))

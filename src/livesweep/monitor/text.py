@@ -14,7 +14,7 @@ from livesweep.numbers import percent
 from livesweep.spectral.adequacy import MIN_COHERENCE, REQUIRED_FRACTION
 
 __all__ = ["percent", "band_text", "duration_text", "time_text", "EPOCH_MIN_S", "md_cell", "md_table", "omega_text", "sweep_text",
-           "coherence_kind_text", "adequacy_markdown", "markdown_test_points", "COHERENCE_KINDS",
+           "coherence_kind_text", "adequacy_markdown", "markdown_test_points", "test_point_line", "COHERENCE_KINDS",
            "DEFAULT_REQUIRED_FRACTION"]
 
 #: Fraction of the band a required pair must cover (one definition: livesweep.spectral.adequacy).
@@ -133,7 +133,7 @@ def _row_verdict(fraction, band, required: float) -> str:
 
 def adequacy_markdown(t_s: float, rows: Sequence[dict], verdict: str, reasons: Sequence[str], *,
                       coherence_kind: str = "ordinary", sweep: dict | None = None,
-                      required_fraction: float = DEFAULT_REQUIRED_FRACTION) -> str:
+                      required_fraction: float = DEFAULT_REQUIRED_FRACTION, lag_s: float | None = None) -> str:
     """The status document: verdict, coherence kind, sweep per input, reasons and the adequacy table.
 
     Parameters
@@ -154,8 +154,11 @@ def adequacy_markdown(t_s: float, rows: Sequence[dict], verdict: str, reasons: S
         ``{input: (omega [rad/s] or None, time remaining [s] or None)}``.
     required_fraction : float
         Threshold of the row verdicts; fractions are printed with :func:`percent` against it.
+    lag_s : float, optional
+        How far behind the link the view is [s] (said when it is over a second).
     """
-    lines = [f"**Verdict: {md_cell(verdict)}**  (flight time {time_text(t_s)})", "",
+    behind = f"; **{lag_s:.0f} s behind the link**" if _finite(lag_s) and float(lag_s) >= 1.0 else ""
+    lines = [f"**Verdict: {md_cell(verdict)}**  (flight time {time_text(t_s)}{behind})", "",
              f"Coherence judged: **{coherence_kind_text(coherence_kind)}**, threshold γ² ≥ {MIN_COHERENCE:g}", ""]
     if sweep:
         lines += [f"- {md_cell(sweep_text(name, *v))}" for name, v in sweep.items()] + [""]
@@ -238,3 +241,23 @@ def _tp_section(number: int, tp: dict, t_s: float) -> list[str]:
     if missing:
         lines += ["", "Still missing:"] + [f"- {md_cell(m)}" for m in missing]
     return lines
+
+
+def test_point_line(number: int, tp: dict) -> str:
+    """One closed test point in a line: ``"TP1 roll (autopilot, 78.6-128.6 s): GO; p/roll 100 % of
+    3.14-75.4 rad/s adequate (+40 points)"``, and what a NO-GO still needs."""
+    start, end = _num(tp.get("start_s")), _num(tp.get("end_s"))
+    span = f"{time_text(start)} - {time_text(end)}" if start is not None and end is not None else "?"
+    head = f"TP{number} {tp.get('swept_input') or '?'} ({tp.get('source', '?')}, {span}): {tp.get('label') or tp.get('verdict')}"
+    band = tp.get("judged_band_rad_s")
+    parts = []
+    for p in tp.get("pairs") or []:
+        frac = p.get("adequate_fraction")
+        if _finite(frac):
+            where = f" of {band_text(band)} rad/s" if band else ""
+            parts.append(f"{p.get('output')}/{p.get('input')} {percent(frac, DEFAULT_REQUIRED_FRACTION)} adequate{where} "
+                         f"({100 * (float(frac) - DEFAULT_REQUIRED_FRACTION):+.0f} points)")
+    line = head + ("; " + ", ".join(parts) if parts else "")
+    if tp.get("verdict") != "GO" and tp.get("missing"):
+        line += "; needs: " + "; ".join(str(m) for m in tp["missing"][:3])
+    return line

@@ -543,7 +543,7 @@ class ExcitationMonitor:
                         alerts.append(Alert("input_correlation", f"inputs {ia} and {ib} are correlated: median "
                                             f"coherence {med:.2f} > {self.max_input_coherence:g} where both carry "
                                             "power; MISO conditioning unreliable", med))
-        return pairs, masks, coverage, tuple(alerts)
+        return pairs, masks, coverage, tuple(alerts), power_masks
 
     def update(self, result: OnlineResult | None, recent_inputs: dict | None = None, *, gaps: int = 0,
                packets_lost: int = 0) -> ExcitationStatus:
@@ -627,7 +627,7 @@ class ExcitationMonitor:
             changed = True
         else:
             changed = False
-        pairs, masks, coverage, corr_alerts = self._cache
+        pairs, masks, coverage, corr_alerts, power_masks = self._cache
         enough = result.n_eff >= self.min_n_eff
         alerts.extend(corr_alerts)
 
@@ -636,6 +636,8 @@ class ExcitationMonitor:
         lookback = self.collapse_lookback_s
         if lookback is None:
             lookback = max(5.0, 2.0 * result.segment_s * (1.0 - result.overlap))
+        # (only where the input still has power: a sweep that has moved on leaves its old band, and
+        # the coherence there falls as it should; that is no collapse)
         for p in self.required_pairs:
             coh, ok = masks[p]
             snaps = self._snaps[p]
@@ -643,14 +645,17 @@ class ExcitationMonitor:
                 snaps.popleft()
             if enough:
                 drop = 0.0
-                for _, _, ref, m_ref in snaps:
-                    drop = max(drop, ref - float(np.median(coh[m_ref])))
+                powered = power_masks[p[1]]
+                for _, _, ref_coh, m_ref in snaps:
+                    m = m_ref & powered
+                    if np.sum(m) >= 3:
+                        drop = max(drop, float(np.median(ref_coh[m])) - float(np.median(coh[m])))
                 if drop > self.collapse_drop:
                     alerts.append(Alert("coherence_collapse", f"{p[0]}/{p[1]}: median coherence over its adequate "
-                                        f"band fell by {drop:.2f} (> {self.collapse_drop:g}) within {lookback:.0f} s",
-                                        drop))
+                                        f"band fell by {drop:.2f} (> {self.collapse_drop:g}) within {lookback:.0f} s "
+                                        "where the input still has power", drop))
                 if changed and np.sum(ok) >= 3:
-                    snaps.append((t_now, coh.size, float(np.median(coh[ok])), ok))
+                    snaps.append((t_now, coh.size, coh.copy(), ok))
 
         # verdict
         reasons = []

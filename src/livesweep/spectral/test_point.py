@@ -104,6 +104,8 @@ class PairJudgement:
         ``"ordinary"`` (SISO on the swept input) or ``"partial"`` (through the reference).
     median_coherence : float
         Over the resolved part of the band.
+    response : FrequencyResponse or None
+        The response judged, over the judged band (what a view draws next to the verdict).
     """
 
     output: str
@@ -114,6 +116,7 @@ class PairJudgement:
     coherence: str
     median_coherence: float
     adequate_range: tuple = (0.0, 0.0)
+    response: object = None
 
     def marginal(self, required: float) -> bool:
         """The threshold lies within the fraction's random error (the bracket straddles it)."""
@@ -316,7 +319,7 @@ def _pair(analysis, ref, o: str, swept: str, lo: float, hi: float, kind: str) ->
                                                      & (e <= MAX_RANDOM_ERROR)), lo, hi))
     widest = max(bands, key=lambda b: math.log(b[1] / b[0]), default=None)
     med = float(np.median(r.coherence[finite])) if np.any(finite) else 0.0
-    return PairJudgement(o, swept, frac, widest, bands, kind, med, (min(out[0], frac), max(out[1], frac)))
+    return PairJudgement(o, swept, frac, widest, bands, kind, med, (min(out[0], frac), max(out[1], frac)), r)
 
 
 def _points(frac: float, required: float) -> str:

@@ -349,7 +349,6 @@ class LiveCapture:
             self._ctl.sendall(struct.pack("<I", len(data)) + data)
         except OSError:
             pass
-        self._ctl.close()
         self._frames_rx.setblocking(True)
         self._frames_rx.settimeout(1.0)
         while True:          # the last status and the summary; frames after the stop are of no use now
@@ -372,6 +371,7 @@ class LiveCapture:
             elif msg[0] == "error":
                 self.summary = {"error": msg[1]}
         self._proc.wait()
+        self._ctl.close()
         self._frames_rx.close()
         self.ended = True
         if self.summary.get("error"):
@@ -458,6 +458,7 @@ class _Recorder:
         self.last_rx: dict = {}
         self.closing = False
         self.monitor_gone = False
+        self.ctl_eof = False
         self.last_status = self.last_flush = time.monotonic()
         self.frames: list = []                 # decoded frames waiting for JSON (reused list)
 
@@ -587,16 +588,17 @@ class _Recorder:
 
     # -- the monitor's messages ---------------------------------------------------------------------
     def control(self) -> None:
-        while True:
+        while not self.ctl_eof:
             try:
                 chunk = self.ctl.recv(1 << 20)
             except (BlockingIOError, InterruptedError):
                 break
             except OSError:
                 chunk = b""
-            if not chunk:
-                self.monitor_gone = True
+            if not chunk:                # the monitor closed its end: it is gone (or was closing anyway)
+                self.monitor_gone = self.monitor_gone or not self.closing
                 self.closing = True
+                self.ctl_eof = True
                 break
             self.ctl_buf += chunk
         buf = self.ctl_buf
