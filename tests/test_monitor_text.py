@@ -84,8 +84,8 @@ def test_adequacy_markdown_rows():
                                    "verdict": "required | GO"}],
                            "NO-GO", [], coherence_kind="partial", sweep={"da": (3.2, 45.0)})
     lines = md.splitlines()
-    assert lines[0] == "**Verdict: NO-GO**  (flight time 12.0 s)"
-    assert "Coherence judged: **partial γ² (MISO-conditioned)**, threshold γ² ≥ 0.6" in lines
+    assert lines[0] == "## NO-GO"                        # the verdict first, as a heading
+    assert "Flight time 12.0 s. Coherence judged: **partial γ² (MISO-conditioned)**, threshold γ² ≥ 0.6" in lines
     assert "- da: sweeping 3.2 rad/s, 45 s to the band top" in lines
     assert "| p/da | 0.3 – 2.5 | 59.9 % | partly adequate |" in lines
     assert "| r/da | — | 0 % | not adequate |" in lines

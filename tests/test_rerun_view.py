@@ -20,7 +20,7 @@ import rerun.blueprint as rrb
 from rerun.chunk import RrdReader
 
 from livesweep.monitor.blueprint import (
-    ADEQUACY_PATH, ALERTS_PATH, FRACTION_PATH, TEST_POINTS_PATH, coherence_path, default_blueprint,
+    ADEQUACY_PATH, ALERTS_PATH, FOCUS_PATH, FRACTION_PATH, TEST_POINTS_PATH, coherence_path, default_blueprint,
     magnitude_path, pair_path, phase_path, plot_box, plot_margins, sweep_frequency_path, telemetry_path, time_remaining_path,
     waterfall_path,
 )
@@ -337,7 +337,7 @@ def test_adequacy_table_fraction_and_alerts(recorded):
     docs = _rows(recorded["chunks"], ADEQUACY_PATH, "TextDocument:text")
     assert [t for t, _ in docs] == list(_ns(T_EST))
     text = docs[-1][1][0]
-    assert "**Verdict: adequate**" in text and "reason 1 \\| piped" in text
+    assert text.startswith("## adequate\n") and "reason 1 \\| piped" in text
     assert "partial γ² (MISO-conditioned)" in text and "ordinary" not in text
     assert "ordinary γ²" in docs[0][1][0]                    # the default kind
     assert "- de: sweeping 3.2 rad/s, 45 s to the band top" in text
@@ -495,7 +495,7 @@ def test_blueprint_is_pure_and_covers_every_entity(recorded):
     assert rr.get_global_data_recording() is None        # built without creating or touching a recording
     assert isinstance(bp, rrb.Blueprint)
     views = _views(bp)
-    assert len(views) == 8 + 2 * len(INPUTS) * len(OUTPUTS)
+    assert len(views) == 9 + 2 * len(INPUTS) * len(OUTPUTS)        # the test-point tab, and every pair's
     # the same inputs give the same layout (names, kinds, origins)
     again = _views(default_blueprint(INPUTS, OUTPUTS))
     assert [(type(v), v.name, v.origin, v.contents) for v in views] == \
@@ -513,7 +513,7 @@ def test_blueprint_is_pure_and_covers_every_entity(recorded):
     assert {str(v.origin) for v in by_type["TensorView"]} == {"/" + waterfall_path(o, i)
                                                              for o in OUTPUTS for i in INPUTS}
     assert {str(v.origin) for v in by_type["Spatial2DView"]} == {"/" + pair_path(o, i)
-                                                                for o in OUTPUTS for i in INPUTS}
+                                                                for o in OUTPUTS for i in INPUTS} | {"/" + FOCUS_PATH}
     # every entity the view wrote is shown by a view of the right kind
     kinds = {"telemetry": "TimeSeriesView", "coherence": "Spatial2DView", "waterfall": "TensorView",
              "magnitude_db": "Spatial2DView", "phase_deg": "Spatial2DView", "sweep_frequency": "TimeSeriesView",

@@ -180,7 +180,7 @@ def _focus_view() -> rrb.Spatial2DView:
     """The swept pair of the test point, as its verdict judged it (one column of plots)."""
     return rrb.Spatial2DView(origin="/" + FOCUS_PATH,
                              contents=["$origin/coherence/**", "$origin/magnitude_db/**", "$origin/phase_deg/**",
-                                       "$origin/title"],
+                                       "$origin/title/**"],
                              name="Test point: the swept pair as judged (γ², |H| [dB], phase [deg] vs ω [rad/s])",
                              visual_bounds=_visual_bounds(1))
 

@@ -752,12 +752,17 @@ class MonitorPipeline:
 
     def _said(self, t_s: float, alerts) -> list:
         """The sliding window's alerts an operator should read now: not the expected effects of a
-        sweep (while a test point runs, the other inputs move with the swept one: the controller's
-        reaction, not a second input), each subject at most every ``ALERT_INTERVAL_S`` of data time."""
-        running = self.test_points.current is not None
+        sweep (while a test point's data is in the window, the other inputs move with the swept one:
+        the controller's reaction, not a second input), each subject at most every
+        ``ALERT_INTERVAL_S`` of data time."""
+        tracker = self.test_points
+        last_end = max((tp["end_s"] for tp in tracker.closed[-1:]), default=None)
+        # a sweep in the window: while a test point runs and until its data has left the window
+        sweeping = tracker.current is not None or bool(tracker.closing) or \
+            (last_end is not None and t_s - last_end < self.s.window_s)
         out = []
         for a in alerts:
-            if running and a.kind == "input_correlation":
+            if sweeping and a.kind == "input_correlation":
                 continue
             if (a := self._alert_gate.admit(t_s, a)) is not None:
                 out.append(a)
@@ -776,8 +781,8 @@ class MonitorPipeline:
         (a closed-loop input's zero crossings would say less), else the input's tracked sweep."""
         sweep = {i: (status.sweep_frequency_rad_s.get(i), status.time_remaining_s.get(i)) for i in self.s.inputs}
         cur = self.test_points.current
-        if cur is None:
-            return sweep, None
+        if cur is None:              # between test points an input's oscillation is no sweep to report
+            return {i: (None, None) for i in sweep}, None
         if cur.swept_input in sweep:                 # the other inputs are the controller's reaction
             sweep = {i: v if i == cur.swept_input else (None, None) for i, v in sweep.items()}
         inj = cur.injection

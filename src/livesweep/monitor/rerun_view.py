@@ -910,9 +910,10 @@ def _sweep_pair(name, v) -> tuple[float | None, float | None]:
 
 def _curve_range(y: np.ndarray, coherent: np.ndarray, *, turns: bool = False) -> tuple[float, float]:
     """The range one curve needs: its coherent finite values, or all its finite values when fewer
-    than two are coherent; (inf, -inf) when nothing is finite. With ``turns`` (a phase), at most
-    two turns about the median of those values: a phase that walks through many turns where the
-    pair is barely coherent must not squeeze the curve the operator reads into a sliver."""
+    than two are coherent; (inf, -inf) when nothing is finite. With ``turns`` (a phase) of a pair
+    coherent over less than half its points, at most two turns about the median of those values:
+    the chance-coherent islands of an unexcited pair, which walk through many turns, must not set
+    an axis of thousands of degrees (a response coherent over the band keeps all its turns)."""
     fin = np.isfinite(y)
     use = fin & coherent
     if use.sum() < 2:
@@ -921,7 +922,7 @@ def _curve_range(y: np.ndarray, coherent: np.ndarray, *, turns: bool = False) ->
         return math.inf, -math.inf
     v = y[use]
     lo, hi = float(v.min()), float(v.max())
-    if turns and hi - lo > 720.0:
+    if turns and hi - lo > 720.0 and (fin & coherent).sum() < 0.5 * fin.sum():
         mid = float(np.median(v))
         lo, hi = max(lo, mid - 360.0), min(hi, mid + 360.0)
     return lo, hi

@@ -158,8 +158,12 @@ def adequacy_markdown(t_s: float, rows: Sequence[dict], verdict: str, reasons: S
         How far behind the link the view is [s] (said when it is over a second).
     """
     behind = f"; **{lag_s:.0f} s behind the link**" if _finite(lag_s) and float(lag_s) >= 1.0 else ""
-    lines = [f"**Verdict: {md_cell(verdict)}**  (flight time {time_text(t_s)}{behind})", "",
-             f"Coherence judged: **{coherence_kind_text(coherence_kind)}**, threshold γ² ≥ {MIN_COHERENCE:g}", ""]
+    lines = [f"## {md_cell(verdict)}", ""]
+    if reasons:                                  # what the verdict is about, under it
+        lines += [f"**{md_cell(reasons[0])}**", ""]
+        reasons = reasons[1:]
+    lines += [f"Flight time {time_text(t_s)}{behind}. Coherence judged: **{coherence_kind_text(coherence_kind)}**, "
+              f"threshold γ² ≥ {MIN_COHERENCE:g}", ""]
     if sweep:
         lines += [f"- {md_cell(sweep_text(name, *v))}" for name, v in sweep.items()] + [""]
     lines += [f"- {md_cell(r)}" for r in reasons]

@@ -190,6 +190,8 @@ class TestPointJudgement:
         if self.swept_rad_s is None:
             return f"nothing of {lo * hz:.3g}-{hi * hz:.3g} Hz swept yet"
         a, b = self.swept_rad_s
+        if a <= lo * (1 + 1e-6) and b >= hi * (1 - 1e-6):
+            return f"all of {lo * hz:.3g}-{hi * hz:.3g} Hz ({lo:.3g}-{hi:.3g} rad/s) swept"
         return f"{a * hz:.3g}-{b * hz:.3g} Hz of {lo * hz:.3g}-{hi * hz:.3g} Hz swept"
 
     def to_dict(self) -> dict:
