@@ -26,10 +26,10 @@ collects its aligned samples and, while it runs and when it closes, asks :func:`
 * **A verdict with its margin.** Each rule says how far it is from its threshold. The adequate
   fraction of a pair is uncertain by the coherence estimate's random error (Bendat & Piersol:
   ``sigma(gamma^2) = 2 gamma^2 eps_r sqrt(1 - gamma^2)`` with ``eps_r`` the response's normalised
-  random error): counting only the frequencies adequate at ``gamma^2 - sigma`` and every frequency
-  adequate at ``gamma^2 + sigma`` brackets it. A verdict the bracket of a deciding rule straddles
-  reads "(marginal)": another flight of the same sweep, or a few lost frames, may decide it the
-  other way. A clear verdict does not flip.
+  random error): counting only the frequencies adequate at ``gamma^2 - k sigma`` and every
+  frequency adequate at ``gamma^2 + k sigma`` (``k`` = :data:`MARGINAL_SIGMAS`) brackets it. A
+  verdict the bracket of a deciding rule straddles reads "(marginal)": another flight of the same
+  sweep, or a few lost frames, may decide it the other way. A clear verdict does not flip.
 * **Running and final.** While the test point runs it is judged over the band swept so far ("GO so
   far: 0.5-2.9 Hz of 0.5-12 Hz swept"); the closing verdict is judged once, over the whole test
   point and the whole band.
@@ -59,7 +59,7 @@ from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW
 from livesweep.spectral.windows import longest_window_samples
 
 __all__ = ["PairJudgement", "TestPointJudgement", "judge_test_point", "REQUIRED_FRACTION", "LOW_FREQUENCY_PERIODS",
-           "NYQUIST_FRACTION", "coherence_sigma"]
+           "NYQUIST_FRACTION", "MARGINAL_SIGMAS", "coherence_sigma"]
 
 #: Periods of its lowest frequency a sweep needs to resolve it (docs/method.md §2.5, T_rec >= 4-5 T_max).
 LOW_FREQUENCY_PERIODS = 4.0
@@ -70,6 +70,12 @@ NYQUIST_FRACTION = 0.8
 _MIN_ISLAND_DECADES = 0.1
 #: A band swept so far narrower than this [decades] is not judged yet.
 _MIN_SWEPT_DECADES = 0.05
+#: The adequate fraction's bracket: the coherence at -/+ this many of its predicted standard
+#: deviations, i.e. one standard deviation of the composite's coherence as it actually scatters:
+#: measured on a system of known coherence (a first-order lag with white output noise, 240 s
+#: records, eight seeds), its error was 1.5 of the sigma its random error predicts (and biased
+#: +0.5 of it). tests/test_judgement.py judges the bracket on another system and other seeds.
+MARGINAL_SIGMAS = 1.5
 
 
 def coherence_sigma(coherence: np.ndarray, random_error: np.ndarray) -> np.ndarray:
@@ -310,7 +316,7 @@ def _pair(analysis, ref, o: str, swept: str, lo: float, hi: float, kind: str) ->
     bands = _adequate_bands(r.omega, ok)
     frac = _log_fraction(bands, lo, hi)
     # the bracket: the coherence at -/+ its random error, with eps_r scaled as sqrt(1 - g) / sqrt(g)
-    sigma = np.where(finite, coherence_sigma(g, eps), 0.0)
+    sigma = MARGINAL_SIGMAS * np.where(finite, coherence_sigma(g, eps), 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         shape = np.sqrt(np.clip(1.0 - g, 0.0, None) / np.clip(g, 1e-12, None))
         out = []

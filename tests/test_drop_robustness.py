@@ -1,0 +1,130 @@
+"""A radio drops frames: 2 % of a recording lost at random changes no verdict that is not marginal.
+
+Recordings: the shipped XV-15 aileron sweeps (two test points found by the sweep itself), and the
+shared ArduCopter SITL SystemID roll chirp as its telemetry arrives over MAVLink (whole, and cut a
+third of the way through). Each is replayed whole, then with 2 % of its messages (any topic: data,
+SystemID texts, parameters, heartbeats) taken out at random with the standard mcap reader and
+writer, for several seeds. Reference: the whole recording's own verdicts; a test point that reads
+"(marginal)" there is allowed to go either way, every other one must not move.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from livesweep.cli import _monitor_settings, build_parser
+from livesweep.monitor.pipeline import MonitorPipeline
+from livesweep.telemetry import mavlink_codec as codec
+from livesweep.telemetry.frames import Frame
+from livesweep.telemetry.recorder import McapRecorder
+from livesweep.telemetry.replay import McapReplaySource
+from livesweep.telemetry.stream_log import dataflash_messages
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT.parent / "shared" / "data" if (ROOT.parent / "shared" / "data").is_dir() else Path("/work/shared/data")
+SID7 = DATA / "ardupilot_sitl_systemid" / "sid_axis7_rate_roll.bin"
+SEEDS = (1, 2, 3, 4)
+
+
+def _settings(*args):
+    return _monitor_settings(build_parser().parse_args(["replay", "x.mcap", *args]))
+
+
+def _drop(src: Path, out: Path, fraction: float, seed: int) -> int:
+    """Copy a recording without ``fraction`` of its messages (livesweep's own results aside)."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    rng = np.random.default_rng(seed)
+    dropped = 0
+    with open(src, "rb") as f, open(out, "wb") as g:
+        r = make_reader(f)
+        w = Writer(g)
+        w.start(profile=r.get_header().profile, library="test")
+        schemas, channels = {}, {}
+        for schema, channel, msg in r.iter_messages(log_time_order=False):
+            if channel.id not in channels:
+                if schema is not None and schema.id not in schemas:
+                    schemas[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
+                channels[channel.id] = w.register_channel(channel.topic, channel.message_encoding,
+                                                          schemas.get(schema.id, 0) if schema else 0,
+                                                          dict(channel.metadata))
+            if not channel.topic.startswith("/livesweep/") and rng.random() < fraction:
+                dropped += 1
+                continue
+            w.add_message(channels[channel.id], msg.log_time, msg.data, msg.publish_time, msg.sequence)
+        for a in r.iter_attachments():
+            w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
+        w.finish()
+    return dropped
+
+
+def _verdicts(log: Path, settings) -> list[tuple]:
+    s = MonitorPipeline(settings, [McapReplaySource(log)], keep_estimates=False).run()
+    return [(tp["swept_input"], tp["verdict"], tp["marginal"], round(tp["start_s"], 1)) for tp in s["test_points"]]
+
+
+def _check(log: Path, settings, tmp: Path, want: list[str]) -> None:
+    whole = _verdicts(log, settings)
+    assert [v for _, v, _, _ in whole] == want, whole
+    for seed in SEEDS:
+        out = tmp / f"drop{seed}.mcap"
+        n = _drop(log, out, 0.02, seed)
+        assert n > 100
+        got = _verdicts(out, settings)
+        assert len(got) == len(whole), (seed, got, whole)
+        for (inp, v, marginal, start), (inp2, v2, _, start2) in zip(whole, got):
+            assert inp2 == inp and abs(start2 - start) < 1.5, (seed, got, whole)
+            assert marginal or v2 == v, (seed, got, whole)
+
+
+def test_the_xv15_sweeps_keep_their_verdicts_when_frames_are_lost(tmp_path):
+    _check(ROOT / "replay_logs" / "xv15_cruise_sweeps_da.mcap",
+           _settings("--case", str(ROOT / "config" / "xv15_channels.toml"), "--window", "240", "--require", "p/da"),
+           tmp_path, ["GO", "GO"])
+
+
+@pytest.fixture(scope="module")
+def sitl_recordings(tmp_path_factory):
+    """The SystemID roll chirp as its 50 Hz telemetry arrives, recorded by the monitor (whole, and
+    cut a third of the way into the chirp)."""
+    if not SID7.is_file():
+        pytest.skip(f"third-party log not found: {SID7}")
+    tmp = tmp_path_factory.mktemp("sitl_drop")
+    settings = _settings("--map", "ardupilot-copter-pid")
+    out = {}
+    for name, end_s in (("whole", 98.0), ("cut", 78.571892 + 50.0 / 3 - 43.384306)):
+        frames, first = [], None
+        for t, msg, rec in dataflash_messages(SID7, start_s=30.0, end_s=end_s, rate_hz=50.0):
+            first = t if first is None else first
+            r = codec.record_from_fields(msg, {k: v for k, v in rec.items() if k not in ("sysid", "compid")},
+                                         sysid=rec["sysid"], compid=rec["compid"])
+            frames.append(Frame(f"/mavlink/{msg}", 1_800_000_000 * 10**9 + int((t - first) * 1e9),
+                                codec.vehicle_time_ns(r, msg), r))
+
+        class Frames:
+            live, finished, counts = False, False, {}
+
+            def poll(self, timeout_s=0.05, max_frames=2000):
+                nonlocal frames
+                got, frames = frames[:max_frames], frames[max_frames:]
+                self.finished = not frames
+                return got
+
+            def close(self):
+                pass
+
+        log = tmp / f"{name}.mcap"
+        MonitorPipeline(settings, [Frames()], recorder=McapRecorder(log, settings=settings.to_dict()),
+                        keep_estimates=False).run()
+        out[name] = log
+    return settings, out
+
+
+@pytest.mark.parametrize("name, want", [("whole", ["GO"]), ("cut", ["NO-GO"])])
+def test_the_systemid_chirp_keeps_its_verdict_when_frames_are_lost(sitl_recordings, name, want, tmp_path):
+    settings, logs = sitl_recordings
+    _check(logs[name], settings, tmp_path, want)
