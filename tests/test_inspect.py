@@ -62,7 +62,10 @@ def test_the_suggested_map_is_accepted_by_the_monitor(inspections, log, tmp_path
     from livesweep.telemetry.replay import McapReplaySource
 
     ins = inspections[log]
-    if not ins.maps:
+    if not ins.maps:                    # said, with why each preset that holds the signals does not fit
+        text = format_inspection(ins)
+        assert "no shipped channel map fits this log" in text or "no channel map can be suggested" in text
+        assert all(f.why for f in ins.fits if not f.fits)
         pytest.skip("inspect suggests no map for this log (no shipped map fits it)")
     name = ins.maps[0][0]
     if ins.duration_s < 10.0:
@@ -97,3 +100,80 @@ def test_new_case_from_a_systemid_log_is_identified(tmp_path, capsys):
     assert p_roll["fraction_of_band"] >= 0.5           # the roll chirp excites roll: the case works as written
     assert cli.main(["new-case", str(sid), "--map", "ardupilot-sysid-dataflash", "--out", str(case)]) == 2
     assert "exists; give --force" in capsys.readouterr().err
+
+
+def _sid_tlog(path, start_s: float, end_s: float) -> float:
+    """The SystemID log's telemetry as a ground station records it (a tlog: [uint64 BE us][frame]),
+    at the 50 Hz stream rate inspect suggests; returns the log's first TimeUS [s]."""
+    import struct
+
+    from livesweep.telemetry import mavlink_codec as codec
+    from livesweep.telemetry.stream_log import dataflash_messages
+    from pymavlink.dialects.v20 import ardupilotmega as mav2
+
+    mav = mav2.MAVLink(None, srcSystem=1, srcComponent=1)
+    msgs = dataflash_messages(DATA / "ardupilot_sitl_systemid" / "sid_axis7_rate_roll.bin", start_s=start_s,
+                              end_s=end_s, rate_hz=50.0)
+    with open(path, "wb") as f:
+        for t, name, rec in msgs:
+            fields = {fl.name: rec.get(fl.name, 0) for fl in codec._spec(name).fields}
+            for fl in codec._spec(name).fields:
+                if fl.kind == "char":
+                    fields[fl.name] = str(fields[fl.name] or "").encode()
+                elif fl.length and not isinstance(fields[fl.name], list):
+                    fields[fl.name] = [0] * fl.length
+            frame = bytes(getattr(mav, name.lower() + "_encode")(**fields).pack(mav))
+            f.write(struct.pack(">Q", 1_700_000_000_000_000 + round(t * 1e6)) + frame)
+    return msgs.first_us * 1e-6
+
+
+def test_a_tlog_is_read_in_one_pass_with_its_systemid_test_points_and_the_presets_its_rates_allow(tmp_path):
+    """A whole flight's tlog: the SystemID runs at the autopilot's own times (its STATUSTEXT; the
+    DataFlash MSG TimeUS, read with pymavlink, as reference), with the band its SID_* parameters set,
+    and whether telemetry covers each; the presets its rates and its frame allow, and why not the others."""
+    import os
+
+    log = DATA / "ardupilot_sitl_systemid" / "sid_axis7_rate_roll.bin"
+    if not log.is_file():
+        pytest.skip("no SystemID roll log")
+    os.environ.setdefault("MAVLINK20", "1")
+    from pymavlink import DFReader
+
+    r = DFReader.DFReader_binary(str(log), zero_time_base=False)
+    texts = []
+    while (m := r.recv_match(type="MSG")) is not None:
+        if m.Message.startswith("SystemID"):
+            texts.append((m.TimeUS * 1e-6, m.Message))
+    tlog = tmp_path / "flight.tlog"
+    t0 = _sid_tlog(tlog, 20.0, 170.0)
+    ins = inspect_log(tlog)
+    assert ins.format == "tlog"
+    starts = [t for t, x in texts if x == "SystemID Starting: axis=7"] + [t for t, x in texts if x.endswith("axis=8")]
+    ends = [t for t, x in texts if x == "SystemID Finished"][:2]
+    first_rx = t0 + 20.0                                      # the tlog's first record: the slice's start
+    assert [run.axis for run in ins.systemid] == [7, 8]
+    for run, a, b in zip(ins.systemid, starts, ends):
+        assert abs(run.start_s - (a - first_rx)) < 0.05 and abs(run.end_s - (b - first_rx)) < 0.05
+        assert "0.5-12 Hz (3.14-75.4 rad/s) in 40 s" in run.what and "magnitude 15" in run.what
+    assert [run.data for run in ins.systemid] == [True, False]     # the log was filtered around axis 7
+    fits = {f.name: f for f in ins.fits}
+    assert ins.maps[0][0] == "ardupilot-copter-pid" and fits["ardupilot-copter-pid"].fits
+    assert "SERVO_OUTPUT_RAW) arrives at 10 Hz" in fits["ardupilot-copter-quad-plus"].why
+    assert "the SystemID band up to 12 Hz needs 30 Hz" in fits["ardupilot-copter-quad-plus"].why
+    assert fits["ardupilot-copter-quad-x"].why.startswith("the vehicle is QUAD/PLUS")
+    text = format_inspection(ins)
+    assert "test points (ArduPilot SystemID):" in text and "(no telemetry in the log during it)" in text
+
+
+def test_a_dataflash_log_names_the_presets_for_its_streamed_telemetry(inspections):
+    """The SystemID DataFlash log: its own preset to replay, and for its telemetry as `livesweep
+    stream` sends it, the rate-loop preset (PID_TUNING at the stream rate) but not the motor mixes
+    (RCOU logged at 10 Hz) nor another frame's."""
+    sid = [p for p in LOGS if p.name == "sid_axis7_rate_roll.bin"]
+    if not sid:
+        pytest.skip("no SystemID roll log")
+    ins = inspections[sid[0]]
+    assert ins.maps[0][0] == "ardupilot-sysid-dataflash" and ins.live_maps == ("ardupilot-copter-pid",)
+    live = {f.name: f for f in ins.fits if f.live}
+    assert "would go at 10 Hz" in live["ardupilot-copter-quad-plus"].why
+    assert live["ardupilot-copter-quad-x"].why.startswith("the vehicle is QUAD/PLUS")

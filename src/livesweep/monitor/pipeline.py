@@ -310,6 +310,7 @@ class MonitorPipeline:
         self._last_view_t = -math.inf
         self._view_updates = 0
         self._newest_rx: int | None = None            # receive time [ns] of the newest frame analysed
+        self._told_system = None                       # the vehicle the sources were told the analysis follows
         self._t_first: float | None = None
         self._t_data: float | None = None             # newest data time analysed [s]
         self.last_status = None
@@ -362,10 +363,7 @@ class MonitorPipeline:
         queue = FrameQueue(self.queue_limit, shed=live)
         ingest = self._ingest = Ingest(self.sources, queue, recorder=self.recorder, wanted_topics=self._wanted,
                                        also_wanted=self.test_points.wants)
-        for src in self.sources:             # a recorder process forwards only what the analysis takes
-            if hasattr(src, "want"):
-                src.want(self._wanted | {"/mavlink/PARAM_VALUE", "/mavlink/STATUSTEXT", "/mavlink/HEARTBEAT",
-                                         "/mavlink/NAMED_VALUE_INT"})
+        self._tell_sources()
         switch = sys.getswitchinterval()
         sys.setswitchinterval(min(switch, SWITCH_INTERVAL_S))   # the ingest thread gets the GIL promptly
         ingest.start()
@@ -443,6 +441,8 @@ class MonitorPipeline:
         self._newest_rx = f.receive_ns
         before = self.aligner.k_frontier
         self.aligner.push(f)
+        if self.aligner.system != self._told_system:
+            self._tell_sources()
         if self.aligner.k_frontier != before:
             self._rx_to_data = (f.receive_ns, self.aligner.frontier_s)
             hist = self._rx_history
@@ -477,6 +477,15 @@ class MonitorPipeline:
         own = sum(sum((src.counts.get("received") or {}).values()) for src in self.sources
                   if getattr(src, "recorded", False))
         return ingest.received - ingest.received_recorded + own
+
+    def _tell_sources(self) -> None:
+        """A recorder process forwards only what the analysis takes: the map's messages, the test-point
+        evidence, and once the aligner follows a vehicle, only that vehicle's data."""
+        self._told_system = self.aligner.system
+        for src in self.sources:
+            if hasattr(src, "want"):
+                src.want(self._wanted | {"/mavlink/PARAM_VALUE", "/mavlink/STATUSTEXT", "/mavlink/HEARTBEAT",
+                                         "/mavlink/NAMED_VALUE_INT"}, self.aligner.system)
 
     def _sources_shed(self) -> int:
         """Frames a recorder process could not hand to the analysis (recorded all the same)."""

@@ -81,15 +81,22 @@ _READY_S = 20.0               # the recorder process must be ready within this [
 def frame_msgids(data: bytes) -> list[int] | None:
     """The message ids of the MAVLink frames in a datagram, from their headers alone (no CRC, no
     decoding); None when the bytes do not frame as MAVLink (the decoder then judges them)."""
+    heads = frame_heads(data)
+    return None if heads is None else [i for i, _ in heads]
+
+
+def frame_heads(data: bytes) -> list[tuple[int, int]] | None:
+    """``(message id, system id)`` of the MAVLink frames in a datagram, from their headers alone;
+    None when the bytes do not frame as MAVLink."""
     out, p, n = [], 0, len(data)
     while p < n:
         magic = data[p]
         if magic == 0xFD and p + 10 <= n:
             length = 12 + data[p + 1] + (13 if data[p + 2] & 1 else 0)
-            out.append(data[p + 7] | (data[p + 8] << 8) | (data[p + 9] << 16))
+            out.append((data[p + 7] | (data[p + 8] << 8) | (data[p + 9] << 16), data[p + 5]))
         elif magic == 0xFE and p + 6 <= n:
             length = 8 + data[p + 1]
-            out.append(data[p + 5])
+            out.append((data[p + 5], data[p + 3]))
         else:
             return None
         p += length
@@ -163,10 +170,11 @@ class CaptureSource:
         """Receive time [ns] of the latest frame per system id, as the recorder saw them."""
         return self._cap.last_rx
 
-    def want(self, topics) -> None:
+    def want(self, topics, system: int | None = None) -> None:
         """Forward only datagrams with one of these ``/mavlink/<MSG>`` topics (and the first of every
-        message type, and the test-point evidence)."""
-        self._cap.want(topics)
+        message type, and the test-point evidence), and once the analysis follows one vehicle
+        (``system``), only that vehicle's data."""
+        self._cap.want(topics, system)
 
     def poll(self, timeout_s: float = 0.05, max_frames: int = 10_000) -> list:
         return self._cap.poll(timeout_s, max_frames)
@@ -223,6 +231,9 @@ class LiveCapture:
         32-byte MAVLink 2 signing key (unsigned and forged frames are refused and counted).
     rcvbuf_bytes : int
         Kernel receive buffer asked for per socket [bytes].
+    forward_buffer_bytes : int
+        Buffer of the socket that hands datagrams to the analysis [bytes]: how far the analysis may
+        fall behind before data is shed for it.
 
     Raises
     ------
@@ -233,7 +244,7 @@ class LiveCapture:
 
     def __init__(self, urls, *, record_path=None, overwrite: bool = False, settings: dict | None = None,
                  metadata: dict | None = None, signing_key: bytes | None = None,
-                 rcvbuf_bytes: int = RCVBUF_BYTES):
+                 rcvbuf_bytes: int = RCVBUF_BYTES, forward_buffer_bytes: int = 8 << 20):
         from livesweep.telemetry.clock import receive_offset_ns
         from livesweep.telemetry.mavlink_in import MavlinkDecoder, parse_source_url
 
@@ -254,10 +265,11 @@ class LiveCapture:
                 self.urls.append(f"udpin:{host}:{port}")
             self._frames_rx, frames_tx = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
             ctl_tx, ctl_rx = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
-            for s in (frames_tx, self._frames_rx, ctl_tx):
+            for s, size in ((frames_tx, forward_buffer_bytes), (self._frames_rx, forward_buffer_bytes),
+                            (ctl_tx, 8 << 20)):
                 for opt in (socket.SO_SNDBUF, socket.SO_RCVBUF):
                     try:
-                        s.setsockopt(socket.SOL_SOCKET, opt, 8 << 20)
+                        s.setsockopt(socket.SOL_SOCKET, opt, size)
                     except OSError:  # pragma: no cover
                         pass
             self._frames_rx.setblocking(False)
@@ -326,7 +338,7 @@ class LiveCapture:
             raise LivesweepError(f"the recorder process is gone ({e.strerror or e}); "
                                  f"exit code {self._proc.poll()}") from None
 
-    def want(self, topics) -> None:
+    def want(self, topics, system: int | None = None) -> None:
         from livesweep.telemetry.mavlink_codec import message_class
 
         ids = set()
@@ -336,7 +348,7 @@ class LiveCapture:
                     ids.add(message_class(t.split("/", 2)[2]).id)
                 except ConfigError:
                     continue
-        self.send(("want", sorted(ids)))
+        self.send(("want", sorted(ids), system))
 
     def close(self):
         """Ask the recorder to read what the sockets still hold, decode everything, finish the file
@@ -450,6 +462,7 @@ class _Recorder:
         self.fwd_bytes = 0
         self.events: deque = deque()           # event packets waiting for the monitor
         self.wanted: set | None = None         # msg ids the analysis wants (None: all)
+        self.system: int | None = None         # the vehicle the analysis follows (None: any)
         self.seen_ids: set = set()
         self.datagrams = [0] * len(self.urls)
         self.bytes = [0] * len(self.urls)
@@ -459,6 +472,7 @@ class _Recorder:
         self.closing = False
         self.monitor_gone = False
         self.ctl_eof = False
+        self.counters: dict | None = None      # the monitor's counters, for the file's metadata
         self.last_status = self.last_flush = time.monotonic()
         self.frames: list = []                 # decoded frames waiting for JSON (reused list)
 
@@ -498,16 +512,18 @@ class _Recorder:
 
     def forward(self, k: int, rx: int, data: bytes) -> None:
         """Hand a datagram to the analysis if it wants it; events are never shed."""
-        ids = frame_msgids(data)
+        heads = frame_heads(data)
         event = False
-        if ids is None:
+        if heads is None:
             want = True
         else:
             want = self.wanted is None
-            for i in ids:
+            system = self.system
+            for i, sysid in heads:
                 if i in EVENT_MESSAGES:
                     event = True
-                if not want and (i in self.wanted or i not in self.seen_ids):
+                if not want and ((i in self.wanted and (system is None or sysid == system))
+                                 or i not in self.seen_ids):
                     want = True
                 self.seen_ids.add(i)
         if not (want or event):
@@ -622,14 +638,23 @@ class _Recorder:
 
                 self.rec.record([Frame(t, rx, v, d) for t, rx, v, d in msg[1]])
         elif kind == "counters":
-            if self.rec is not None:
-                self.rec.set_counters(msg[1])
+            self.counters = msg[1]
         elif kind == "want":
             self.wanted = set(msg[1]) | set(EVENT_MESSAGES)
+            self.system = msg[2]
         elif kind == "close":
             self.closing = True
 
     # -- status -------------------------------------------------------------------------------------
+    def refresh_drops(self) -> None:
+        """The kernel's drop count from /proc too (the one stamped on datagrams arrives with the next)."""
+        from livesweep.telemetry.mavlink_in import udp_kernel_drops
+
+        for k, sock in enumerate(self.socks):
+            drops = udp_kernel_drops(sock)
+            if drops is not None:
+                self.kernel_drops[k] = max(self.kernel_drops[k], drops)
+
     def status(self) -> dict:
         counts: dict = {}
         for k, dec in enumerate(self.decoders):
@@ -652,6 +677,8 @@ class _Recorder:
     def periodic(self, now: float) -> None:
         if now - self.last_status >= _STATUS_EVERY_S:
             self.last_status = now
+            if int(now) != int(self.last_status - _STATUS_EVERY_S):   # about once a second
+                self.refresh_drops()
             self.flush_forward()
             self.send_out(("status", self.status()))
         if self.rec is not None and now - self.last_flush >= _FLUSH_EVERY_S:
@@ -693,8 +720,15 @@ class _Recorder:
         while self.backlog:
             self.decode(10_000)
         self.control()            # the monitor's last results and counters
+        self.refresh_drops()
         st = self.status()
         summary = {"status": st, "message_counts": {}}
+        if self.rec is not None and self.counters is not None:
+            name = ", ".join(self.urls)              # this process's source, with its final counts
+            for entry in self.counters.get("sources", []):
+                if entry.get("name") == name:
+                    entry.update(st["counts"])
+            self.rec.set_counters(self.counters)
         if self.rec is not None:
             summary["message_counts"] = dict(self.rec.message_counts)
             self.rec.close()
@@ -708,6 +742,11 @@ class _Recorder:
 
 
 def _main() -> int:
+    import gc
+
+    # the decode backlog of a burst holds millions of objects: a full collection over it would stall
+    # the socket loop; the loop makes no reference cycles worth collecting often
+    gc.set_threshold(100_000, 50, 1000)
     signal.signal(signal.SIGINT, signal.SIG_IGN)      # the terminal's Ctrl-C is the monitor's to handle
     signal.signal(signal.SIGHUP, signal.SIG_IGN)
     cfg = json.loads(sys.stdin.buffer.read())

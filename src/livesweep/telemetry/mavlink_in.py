@@ -98,7 +98,7 @@ from livesweep.telemetry.frames import Frame
 from livesweep.telemetry.mavlink_codec import _dialect, mavutil  # imported with MAVLINK20=1
 from livesweep.telemetry.mavlink_out import parse_url
 
-__all__ = ["MavlinkSource", "TlogSource", "MavlinkDecoder"]
+__all__ = ["MavlinkSource", "TlogSource", "MavlinkDecoder", "udp_kernel_drops"]
 
 log = logging.getLogger(__name__)
 
@@ -361,6 +361,29 @@ class MavlinkDecoder:
 # ======================================================================================
 
 
+def udp_kernel_drops(sock: socket.socket) -> int | None:
+    """The datagrams the kernel dropped for a full receive buffer of ``sock``, from ``/proc/net/udp``
+    (Linux; None elsewhere or when it cannot be read). The count the kernel stamps on each datagram
+    (``SO_RXQ_OVFL``) only arrives with the next one: this also counts drops at the end of a burst."""
+    if not _KERNEL_DROPS:
+        return None
+    try:
+        inode = str(os.fstat(sock.fileno()).st_ino)
+    except (OSError, ValueError):
+        return None
+    for table in ("/proc/net/udp", "/proc/net/udp6"):
+        try:
+            with open(table) as f:
+                next(f)
+                for line in f:
+                    cols = line.split()
+                    if len(cols) >= 13 and cols[9] == inode:
+                        return int(cols[12])
+        except (OSError, ValueError, StopIteration):
+            continue
+    return None
+
+
 def _looks_like_file(url: str) -> bool:
     if url.startswith("/dev/") or _NET_PREFIX_RE.match(url) or "://" in url:
         return False
@@ -559,21 +582,9 @@ class MavlinkSource:
         """
         if self._kind != "udpin" or not _KERNEL_DROPS:
             return
-        try:
-            inode = os.fstat(self._conn.port.fileno()).st_ino
-        except (OSError, ValueError):
-            return
-        for table in ("/proc/net/udp", "/proc/net/udp6"):
-            try:
-                with open(table) as f:
-                    next(f)
-                    for line in f:
-                        cols = line.split()
-                        if len(cols) >= 13 and cols[9] == str(inode):
-                            self._proc_drops = int(cols[12])
-                            return
-            except (OSError, ValueError, StopIteration):
-                continue
+        drops = udp_kernel_drops(self._conn.port)
+        if drops is not None:
+            self._proc_drops = drops
 
     def _recv_udp(self) -> tuple[bytes, Any] | None:
         sock = self._conn.port

@@ -1,0 +1,112 @@
+"""The recorder process: every datagram recorded as received, the analysis fed without holding it up.
+
+References the code did not make: the bytes the sender put on the wire (a real UDP socket on
+127.0.0.1) and pymavlink's own parser, for the message ids read from the frame headers.
+"""
+
+from __future__ import annotations
+
+import base64
+import socket
+import time
+
+import numpy as np
+import pytest
+
+from livesweep.telemetry import mavlink_codec as codec  # noqa: F401  (MAVLink 2 before pymavlink loads)
+from livesweep.telemetry.capture import EVENT_MESSAGES, LiveCapture, frame_msgids
+from livesweep.telemetry.mcap_log import read_messages, read_summary
+from livesweep.telemetry.recorder import RAW_TOPIC
+from pymavlink.dialects.v20 import ardupilotmega as mav2
+
+KEY = bytes(range(32))
+
+
+def _frames(n: int, seed: int, signed: bool = False) -> list[bytes]:
+    """Frames of assorted messages (MAVLink 2, optionally signed, and MAVLink 1)."""
+    rng = np.random.default_rng(seed)
+    m2 = mav2.MAVLink(None, srcSystem=1, srcComponent=1)
+    if signed:
+        m2.signing.secret_key, m2.signing.sign_outgoing, m2.signing.link_id = KEY, True, 0
+        m2.signing.timestamp = 1
+    out = []
+    for k in range(n):
+        choice = int(rng.integers(0, 5))
+        if choice == 0:
+            msg = mav2.MAVLink_attitude_message(k, *rng.standard_normal(6).tolist())
+        elif choice == 1:
+            msg = mav2.MAVLink_statustext_message(6, b"SystemID Starting: axis=7")
+        elif choice == 2:
+            msg = mav2.MAVLink_pid_tuning_message(1, *rng.standard_normal(6).tolist())
+        elif choice == 3:
+            msg = mav2.MAVLink_heartbeat_message(2, 3, 81, 25, 4, 3)
+        else:
+            msg = mav2.MAVLink_param_value_message(b"SID_F_STOP_HZ", 12.0, 9, 1300, k)
+        out.append(bytes(msg.pack(m2)))
+    return out
+
+
+@pytest.mark.parametrize("signed", [False, True])
+def test_message_ids_from_the_headers_are_pymavlinks(signed):
+    """Datagrams of one to three frames: the ids read from the headers alone are the ones pymavlink
+    decodes; bytes that do not frame as MAVLink say so (None)."""
+    frames = _frames(300, 1, signed)
+    parser = mav2.MAVLink(None)
+    parser.robust_parsing = True
+    if signed:
+        parser.signing.secret_key = KEY
+    k = 0
+    while k < len(frames):
+        group = frames[k:k + 1 + k % 3]
+        k += len(group)
+        data = b"".join(group)
+        want = [m.get_msgId() for m in parser.parse_buffer(data) or ()]
+        assert frame_msgids(data) == want
+    assert frame_msgids(b"\x00garbage") is None
+    v1 = mav2.MAVLink_heartbeat_message(2, 3, 81, 25, 4, 3)
+    m1 = mav2.MAVLink(None)
+    m1.WIRE_PROTOCOL_VERSION = "1.0"
+    assert frame_msgids(bytes(v1.pack(m1, force_mavlink1=True))) == [0]
+
+
+def test_every_datagram_is_recorded_as_received_and_test_point_evidence_is_never_shed(tmp_path):
+    """An analysis that takes nothing for a while (a busy machine): the recorder records every
+    datagram byte for byte and decoded, skips data for the analysis (counted), and holds back the
+    test-point evidence until the analysis takes it: none of it is shed."""
+    frames = _frames(20_000, 2)
+    out = tmp_path / "cap.mcap"
+    cap = LiveCapture(["udpin:127.0.0.1:0"], record_path=out, forward_buffer_bytes=32 * 1024)
+    port = int(cap.urls[0].rsplit(":", 1)[1])
+    try:
+        cap.want(["/mavlink/ATTITUDE"])                         # the map's topic; PID_TUNING is not wanted
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            t0 = time.monotonic()
+            for i, d in enumerate(frames):                      # ~10 000 datagrams/s, nobody polling
+                s.sendto(d, ("127.0.0.1", port))
+                if i % 500 == 499:
+                    time.sleep(max(0.0, t0 + (i + 1) / 10_000 - time.monotonic()))
+        time.sleep(1.0)
+        got = []
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:                      # now the analysis catches up
+            more = cap.poll(timeout_s=0.2)
+            got += more
+            if not more and cap.counts.get("datagrams") == len(frames):
+                break
+    finally:
+        cap.close()
+    events = [d for d in frames if frame_msgids(d)[0] in EVENT_MESSAGES]
+    got_events = [f for f in got if f.topic.rsplit("/", 1)[1] in EVENT_MESSAGES.values()]
+    assert len(got_events) == len(events)                        # never shed
+    assert sum(f.topic == "/mavlink/PID_TUNING" for f in got) == 1   # not wanted: its first frame only
+    counts = cap.counts
+    attitude_sent = sum(frame_msgids(d)[0] == 30 for d in frames)
+    attitude_got = sum(f.topic == "/mavlink/ATTITUDE" for f in got)
+    assert counts["analysis_shed"] > 0                            # the analysis fell behind ...
+    assert counts["analysis_shed"] == attitude_sent - attitude_got   # ... and every frame it missed is counted
+    assert counts["datagrams"] == len(frames) and counts["kernel_drops"] == 0
+    # the recording: every datagram as received, in order, and every message decoded
+    raw = [base64.b64decode(m.data["b64"]) for m in read_messages(out, topics=RAW_TOPIC)]
+    assert raw == frames
+    s = read_summary(out)
+    assert s.complete and sum(v for k, v in s.message_counts.items() if k.startswith("/mavlink/")) == len(frames)
