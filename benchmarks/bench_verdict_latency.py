@@ -5,9 +5,11 @@ A `livesweep sim` process streams the XV-15 cruise sweeps (both axes, ``--repeat
 MAVLink 2 over UDP loopback at 8x real time (~2 000 msg/s). A thread of this process acts as the
 operator: every ``--cycle`` wall seconds it sends a NAMED_VALUE_INT "LS_TP" marker (1: a test point
 sweeping ``da`` starts; 0: it ends) on the same link, so the verdict changes dozens of times
-(WAIT when a test point opens, GO or NO-GO when it is judged). The full monitor runs in this
-process: MAVLink source -> MCAP recorder (verdicts flushed to the file as they are recorded) ->
-aligner -> estimator and test-point judge (update every 0.2 s of wall time) -> Rerun (.rrd).
+(WAIT when a test point opens, GO or NO-GO when it is judged). The full monitor runs as the
+``livesweep monitor`` command runs it: the recorder process (the UDP socket and the MCAP file,
+verdicts flushed to the file as they are recorded) and, in this process, aligner -> estimator and
+test-point judge (update every 0.2 s of wall time) -> Rerun (.rrd). ``--hog`` runs it all beside
+processes that keep every core busy.
 
 Measured in the same run, on the same process clock (``livesweep.telemetry.clock.receive_ns``):
 
@@ -21,7 +23,7 @@ Measured in the same run, on the same process clock (``livesweep.telemetry.clock
 Printed: p50/p99/max of each, the monitor's p99 as a ratio to the update period (the issue's
 budget is p99 <= 250 ms) and to the baseline's p99.
 
-    python benchmarks/bench_verdict_latency.py [--speed 8] [--repeat 2] [--cycle 3]
+    python benchmarks/bench_verdict_latency.py [--speed 8] [--repeat 2] [--cycle 3] [--hog]
 """
 
 from __future__ import annotations
@@ -111,22 +113,20 @@ def monitor(speed: float, repeat: int, cycle_s: float, out: Path) -> dict:
     from livesweep.config import TestPointSettings, load_channel_map
     from livesweep.monitor.pipeline import MonitorPipeline, MonitorSettings
     from livesweep.monitor.rerun_view import RerunView
-    from livesweep.telemetry.mavlink_in import MavlinkSource
+    from livesweep.telemetry.capture import LiveCapture
     from livesweep.telemetry.mcap_log import read_messages
-    from livesweep.telemetry.recorder import McapRecorder
 
     signals, _ = load_channel_map(ROOT / "config" / "xv15_channels.toml")
     period = UPDATE_WALL_S * speed                      # data seconds per wall update
     st = MonitorSettings(signals=signals, inputs=("da", "dr"), outputs=("p", "r", "ay", "beta"), band_rad_s=(0.5, 20.0),
                          window_s=120.0, update_period_s=period, view_period_s=period,
                          test_points=TestPointSettings(sources=("marker",), min_duration_s=1.0))
-    src = MavlinkSource("udpin:127.0.0.1:0")
-    port = src.local_address[1]
+    cap = LiveCapture(["udpin:127.0.0.1:0"], record_path=out / "verdict.mcap", settings=st.to_dict())
+    port = int(cap.urls[0].rsplit(":", 1)[1])
     sim = start_sim(port, speed, repeat)
     op = Operator(port, cycle_s)
-    rec = McapRecorder(out / "verdict.mcap", settings=st.to_dict())
     view = RerunView(list(st.inputs), list(st.outputs), recording_id="bench", save_path=out / "verdict.rrd")
-    pipe = MonitorPipeline(st, [src], recorder=rec, view=view, keep_estimates=False)
+    pipe = MonitorPipeline(st, [cap.source], recorder=cap.recorder, view=view, keep_estimates=False)
     done = []
 
     def stop():
@@ -137,7 +137,10 @@ def monitor(speed: float, repeat: int, cycle_s: float, out: Path) -> dict:
         return time.monotonic() - done[0] > 1.0
 
     op.start()
-    summary = pipe.run(stop=stop)
+    try:
+        summary = pipe.run(stop=stop)
+    finally:
+        cap.close()
     op.join()
     verdicts = [(m.log_time_ns, m.data) for m in read_messages(out / "verdict.mcap", topics="/livesweep/verdict")]
     # a marker-caused change: the first verdict recorded after a start marker was sent, before the next marker
@@ -153,15 +156,29 @@ def monitor(speed: float, repeat: int, cycle_s: float, out: Path) -> dict:
             "verdicts": sorted({d["verdict"] for _, d in verdicts})}
 
 
+def measure(speed: float, repeat: int, cycle_s: float) -> tuple[dict, dict]:
+    """The baseline and the monitor on the same stream, one after the other."""
+    b = baseline(speed, repeat, cycle_s)
+    with tempfile.TemporaryDirectory() as tmp:
+        m = monitor(speed, repeat, cycle_s, Path(tmp))
+    return b, m
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--speed", type=float, default=8.0, help="x real time: 8 gives about 2000 msg/s")
     ap.add_argument("--repeat", type=int, default=2, help="sweeps per axis (2: about 60 s of wall time at 8x)")
     ap.add_argument("--cycle", type=float, default=3.0, help="wall seconds from one marker start to the next")
+    ap.add_argument("--hog", action="store_true", help="beside a process keeping every core busy")
     args = ap.parse_args()
-    b = baseline(args.speed, args.repeat, args.cycle)
-    with tempfile.TemporaryDirectory() as tmp:
-        m = monitor(args.speed, args.repeat, args.cycle, Path(tmp))
+    if args.hog:
+        sys.path.insert(0, str(ROOT / "tests"))
+        from helpers import CpuHog
+
+        with CpuHog():
+            b, m = measure(args.speed, args.repeat, args.cycle)
+    else:
+        b, m = measure(args.speed, args.repeat, args.cycle)
     print(f"stream: {m['received']} MAVLink 2 messages in {m['wall_s']:.1f} s ({m['received'] / m['wall_s']:.0f} msg/s), "
           f"{m['markers']} operator markers, {m['changes']} verdict changes ({', '.join(m['verdicts'])})")
     print(f"baseline bare pymavlink, marker send -> parse          : {stats(b['lat'])}")
