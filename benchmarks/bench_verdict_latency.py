@@ -52,7 +52,7 @@ class Operator(threading.Thread):
         super().__init__(daemon=True)
         from livesweep.telemetry.mavlink_out import MavlinkSender
 
-        self.tx = MavlinkSender(f"udpout:127.0.0.1:{port}")
+        self.tx = MavlinkSender(f"udpout:127.0.0.1:{port}", source_system=255, source_component=190)  # a ground station
         self.cycle_s = cycle_s
         self.sent: list[tuple[int, int]] = []          # (value, receive_ns() at send)
         self.halt = threading.Event()
@@ -64,7 +64,7 @@ class Operator(threading.Thread):
         self.halt.wait(self.cycle_s)                    # the first data first
         while not self.halt.is_set():
             t = receive_ns()
-            self.tx.send_record("NAMED_VALUE_INT", {"time_boot_ms": 0, "name": "LS_TP", "value": value})
+            self.tx.send_record("NAMED_VALUE_INT", {"time_boot_ms": (t // 1_000_000) % 2**32, "name": "LS_TP", "value": value})
             self.sent.append((value, t))
             value = 1 - value
             self.halt.wait(self.cycle_s / 2)

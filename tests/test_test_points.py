@@ -132,6 +132,13 @@ def test_markers_open_and_close_test_points_on_the_data_clock():
         (f("/mavlink/NAMED_VALUE_INT", {"sysid": 1, "name": "LS_TP", "value": 1}), ("start", "marker", "da")),
         (f("/mavlink/NAMED_VALUE_INT", {"sysid": 1, "name": "LS_TP", "value": 0}), ("end", "marker", None)),
         (f("/mavlink/STATUSTEXT", {"sysid": 2, "text": "livesweep start dr"}), None),       # another vehicle
+        # the operator's ground station: system 255 by convention, or any system whose HEARTBEAT is a GCS
+        (f("/mavlink/NAMED_VALUE_INT", {"sysid": 255, "name": "LS_TP", "value": 2}), ("start", "marker", "dr")),
+        (f("/mavlink/STATUSTEXT", {"sysid": 255, "text": "livesweep end"}), ("end", "marker", None)),
+        (f("/mavlink/STATUSTEXT", {"sysid": 255, "text": "SystemID Starting: axis=7"}), None),  # not its say
+        (f("/mavlink/NAMED_VALUE_INT", {"sysid": 250, "name": "LS_TP", "value": 1}), None),
+        (f("/mavlink/HEARTBEAT", {"sysid": 250, "type": 6, "autopilot": 8}), None),
+        (f("/mavlink/NAMED_VALUE_INT", {"sysid": 250, "name": "LS_TP", "value": 1}), ("start", "marker", "da")),
         (f("/mavlink/STATUSTEXT", {"sysid": 1, "text": "PreArm: Gyros not calibrated"}), None),
     ]
     for frame, want in cases:

@@ -37,7 +37,8 @@ import numpy as np
 from livesweep.errors import ConfigError
 from livesweep.monitor.alerts import ALERT_INTERVAL_S, AlertGate
 from livesweep.monitor.ingest import FrameQueue, Ingest
-from livesweep.monitor.testpoints import CLOSE_WAIT_S, GRID_TOL, LOST_AFTER_S, LOST_TOPIC, SOURCES, TestPointTracker
+from livesweep.monitor.testpoints import (CLOSE_WAIT_S, GCS_SYSID, GRID_TOL, LOST_AFTER_S, LOST_TOPIC, SOURCES,
+                                         TestPointTracker)
 from livesweep.monitor.text import time_text
 from livesweep.spectral import DEFAULT_WINDOW_S
 from livesweep.spectral.excitation import Alert, ExcitationMonitor
@@ -847,7 +848,8 @@ class MonitorPipeline:
         grew = {k: v - self._seen_anomalies.get(k, 0) for k, v in counts.items() if v > self._seen_anomalies.get(k, 0)}
         self._seen_anomalies = counts
         systems = {str(k) for s in c["sources"] for k in (s.get("by_system") or {})}
-        new_systems = sorted(systems - self._seen_systems) if self._seen_systems else []
+        # a ground station on the link is normal (its markers count): another vehicle is worth saying
+        new_systems = sorted(systems - self._seen_systems - {str(GCS_SYSID)}) if self._seen_systems else []
         self._seen_systems |= systems
         words = {key: w for _, key, w in LINK_ANOMALIES}
         alerts = []

@@ -15,7 +15,9 @@ authority (``sources`` in a map's ``[test_points]`` table selects them):
 * **marker**: the operator says so: a line typed in the monitor's terminal (``s roll`` / ``e``,
   recorded as ``/marker/terminal``), a JSON message ``{"action": "start", "input": "roll"}`` on a
   Zenoh key ending in ``/marker``, a MAVLink STATUSTEXT "livesweep start roll" / "livesweep end", or a
-  NAMED_VALUE_INT "LS_TP" (value k > 0: start sweeping input k, 1-based; 0: end).
+  NAMED_VALUE_INT "LS_TP" (value k > 0: start sweeping input k, 1-based; 0: end), from the
+  vehicle analysed or from a ground station (system id 255, or any system whose HEARTBEAT says
+  MAV_TYPE_GCS); another vehicle's markers are ignored.
 * **sweep**: no one said so, but an input oscillates well above its quiet level (its standard
   deviation over each second stands ``4x`` above its recent quiet level for 3 seconds and it
   crosses its mean at least 3 times: a motor spooling up or a trim change is not a sweep); the
@@ -56,6 +58,10 @@ MARKER_TOPIC = "/marker/terminal"
 LOST_TOPIC = "/marker/telemetry_lost"
 #: No frame of the analysed vehicle for this long [s of receive time] during a test point: telemetry lost.
 LOST_AFTER_S = 2.0
+#: A ground station's system id by convention (QGroundControl, Mission Planner, MAVProxy).
+GCS_SYSID = 255
+#: HEARTBEAT ``type`` of a ground station.
+MAV_TYPE_GCS = 6
 #: ArduCopter's flight-mode number of SYSTEMID (custom_mode of HEARTBEAT, Mode of DataFlash MODE).
 ARDUPILOT_SYSTEMID_MODE = 25
 #: How near a grid sample a time may be and still count as on it [fraction of a sample period].
@@ -323,6 +329,7 @@ class TestPointTracker:
         self._pre = deque()                          # (t0, values, valid) blocks of the recent past
         self._sweep = _SweepDetector(self.inputs, self.fs) if "sweep" in self.sources else None
         self._modes: dict = {}                       # (topic, sysid) -> last mode
+        self._ground_stations: set = {GCS_SYSID}     # systems whose HEARTBEAT says MAV_TYPE_GCS
         self._last_end: float | None = None          # end of the last test point [s]
         self.ignored = 0                             # detected activity shorter than a test point
         #: the latest judgement of each recent test point, by its record's ``start_s`` (what a view draws)
@@ -358,10 +365,15 @@ class TestPointTracker:
         d = frame.data
         topic = frame.topic
         sysid = d.get("sysid")
-        if sysid is not None and system is not None and sysid != system:
-            return []
-        out = []
         auto, marker = "autopilot" in self.sources, "marker" in self.sources
+        if sysid is not None and system is not None and sysid != system:
+            # another system: a ground station's markers count (the operator's), nothing else does
+            if topic == "/mavlink/HEARTBEAT" and d.get("type") == MAV_TYPE_GCS:
+                self._ground_stations.add(sysid)
+            if sysid != GCS_SYSID and sysid not in self._ground_stations:
+                return []
+            auto = False
+        out = []
         if topic == LOST_TOPIC:
             silent = d.get("silent_s")
             silent = f" (no frame for {silent:.1f} s)" if isinstance(silent, (int, float)) else ""
