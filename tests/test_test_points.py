@@ -103,6 +103,29 @@ def test_a_sweep_found_by_its_oscillation_is_go_and_a_third_of_it_no_go_naming_w
     assert "it oscillated over" in gap
 
 
+def test_telemetry_lost_after_the_sweep_ended_keeps_its_verdict_and_lost_during_it_is_no_go():
+    """The link drops 3 s into the trim after the sweep (before the 5 quiet seconds that end a
+    detected sweep): the sweep was over, so it is judged on what it holds (GO, ending where the
+    simulator's sweep ended). Dropped two thirds of the way through the sweep: NO-GO, telemetry lost."""
+    res, frames = sim_frames(seed=21)
+    seg, t0, t1 = sweep_times(res)
+
+    def lost_at(cut_s):
+        kept = [f for f in frames if f.vehicle_ns is None or f.vehicle_ns * 1e-9 < cut_s]
+        rx = max(f.receive_ns for f in kept) + int(testpoints.LOST_AFTER_S * 1e9)
+        return kept + [Frame(testpoints.LOST_TOPIC, rx, None, {"silent_s": testpoints.LOST_AFTER_S, "sysid": 1})]
+
+    _, s = run(lost_at(t1 + 3.0))
+    (tp,) = s["test_points"]
+    assert tp["verdict"] == "GO" and abs(tp["end_s"] - t1) <= 3.0, tp
+    assert "da quiet for" in tp["end_note"] and "telemetry lost" in tp["end_note"]
+    assert not any("telemetry lost" in m for m in tp["missing"])
+
+    _, s = run(lost_at(t0 + 2 * (t1 - t0) / 3))
+    (tp,) = s["test_points"]
+    assert tp["verdict"] == "NO-GO" and any("telemetry lost" in m for m in tp["missing"]), tp
+
+
 def test_no_test_point_and_no_go_from_doublets_or_a_spool_up_ramp():
     """What a sliding window called GO on a real stream: a trim ramp (a motor spooling up) and
     short pilot inputs. Neither opens a test point; the verdict stays WAIT."""
@@ -227,6 +250,37 @@ def test_arducopter_systemid_opens_and_closes_the_test_point_and_judges_it(sid7)
     # blurred by the comparison window (the 5 s of loiter logged before the chirp: 2 pi / 5 s bins)
     bins = 2 * math.pi / 5.0
     assert f_cut_rad_s - bins <= lo <= f_cut_rad_s + 3 * bins, (gap, f_cut_rad_s)
+
+
+def test_telemetry_lost_after_the_autopilots_chirp_ended_is_judged_on_what_it_holds(sid7):
+    """The link drops right after ArduPilot's chirp has faded out, before "SystemID Finished": the
+    test point ends where the chirp ended (ArduPilot's own SIDD log: its last sample of the chirp)
+    and is judged GO; the same link dropped 5 s before the chirp's end is NO-GO, telemetry lost."""
+    from livesweep.telemetry.mcap_log import read_fields
+
+    sidd = read_fields(sid7, "/dataflash/SIDD", ["Targ", "TimeUS"])
+    chirp_end = float(sidd["TimeUS"][np.nonzero(sidd["Targ"])[0][-1]]) * 1e-6
+
+    def dropped_at(t_drop):
+        class Dropped(McapReplaySource):
+            last_rx = 0
+
+            def poll(self, timeout_s=0.05, max_frames=10_000):
+                out = [f for f in super().poll(timeout_s, max_frames)
+                       if f.data.get("TimeUS", 0) * 1e-6 < t_drop and (f.vehicle_ns is None or f.vehicle_ns * 1e-9 < t_drop)]
+                if out:
+                    self.last_rx = max(self.last_rx, max(f.receive_ns for f in out))
+                if self.finished:
+                    out.append(Frame(testpoints.LOST_TOPIC, self.last_rx + int(testpoints.LOST_AFTER_S * 1e9), None,
+                                     {"silent_s": testpoints.LOST_AFTER_S}))
+                return out
+        return MonitorPipeline(dataflash_settings(), [Dropped(sid7)], keep_estimates=False).run()["test_points"][0]
+
+    tp = dropped_at(chirp_end + 0.2)
+    assert tp["verdict"] == "GO" and abs(tp["end_s"] - chirp_end) < 0.1, tp
+    assert "injection had ended" in tp["end_note"]
+    tp = dropped_at(chirp_end - 5.0)
+    assert tp["verdict"] == "NO-GO" and any("telemetry lost" in m for m in tp["missing"]), tp
 
 
 def test_terminal_markers_reach_the_recording_and_open_a_test_point(tmp_path):

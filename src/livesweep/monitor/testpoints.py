@@ -29,7 +29,9 @@ every ``JUDGE_EVERY_S`` of data over the band swept so far (a *running* verdict:
 Hz of 0.5-12 Hz swept"); when it closes it is judged once, over all of it and the whole band
 (:func:`livesweep.spectral.test_point.judge_test_point`). A closing verdict that differs from the
 last running one says why. The monitor closes a test point whose telemetry stopped
-(:data:`LOST_TOPIC`: no frame of the vehicle for ``LOST_AFTER_S``) NO-GO with "telemetry lost".
+(:data:`LOST_TOPIC`: no frame of the vehicle for ``LOST_AFTER_S``) NO-GO with "telemetry lost",
+unless its sweep was already over (the autopilot's chirp had ended, or a detected sweep's input had
+been quiet for a while): then it is judged on what it holds.
 Everything depends on the frames and samples alone, so a replay reproduces the test points exactly.
 """
 
@@ -58,6 +60,11 @@ MARKER_TOPIC = "/marker/terminal"
 LOST_TOPIC = "/marker/telemetry_lost"
 #: No frame of the analysed vehicle for this long [s of receive time] during a test point: telemetry lost.
 LOST_AFTER_S = 2.0
+#: A detected sweep's input quiet this long [s] when the telemetry stops: the sweep was over.
+_QUIET_BEFORE_LOSS_S = 2
+#: Samples to within this of the end of the autopilot's chirp [s] (its fade-out) when the telemetry
+#: stops: the chirp was over.
+_CHIRP_END_TOL_S = 0.5
 #: A ground station's system id by convention (QGroundControl, Mission Planner, MAVProxy).
 GCS_SYSID = 255
 #: HEARTBEAT ``type`` of a ground station.
@@ -208,8 +215,8 @@ class _SweepDetector:
         self._quiet = {i: deque(maxlen=baseline_s) for i in self.inputs}   # recent quiet 1-s std's
         self._run = {i: [] for i in self.inputs}             # (t, std, samples) of the current active run
         self.active: str | None = None
-        self._quiet_for = 0
-        self._last_active_t = 0.0
+        self.quiet_for = 0
+        self.last_active_t = 0.0
 
     def _baseline(self, i: str) -> float | None:
         q = self._quiet[i]
@@ -262,8 +269,8 @@ class _SweepDetector:
                     self._quiet[i].append(stds[i])
             if best is not None:
                 self.active = best
-                self._quiet_for = 0
-                self._last_active_t = t_sec + 1.0
+                self.quiet_for = 0
+                self.last_active_t = t_sec + 1.0
                 events.append(TestPointEvent(self._run[best][0][0], "start", "sweep", best,
                                              f"{best} oscillates {best_ratio:.0f}x above its quiet level"))
                 for i in self.inputs:
@@ -272,12 +279,12 @@ class _SweepDetector:
         i = self.active
         base = self._baseline(i)
         if base is not None and stds[i] > 2.0 * max(base, 1e-12):
-            self._quiet_for = 0
-            self._last_active_t = t_sec + 1.0
+            self.quiet_for = 0
+            self.last_active_t = t_sec + 1.0
         else:
-            self._quiet_for += 1
-            if self._quiet_for >= self.quiet_end_s:
-                events.append(TestPointEvent(self._last_active_t, "end", "sweep", i,
+            self.quiet_for += 1
+            if self.quiet_for >= self.quiet_end_s:
+                events.append(TestPointEvent(self.last_active_t, "end", "sweep", i,
                                              f"{i} quiet for {self.quiet_end_s} s"))
                 self.active = None
         return events
@@ -423,6 +430,20 @@ class TestPointTracker:
                 out.append(self._marker(t_s, action, d.get("input"), f"{topic}: {d.get('note', '')}".strip()))
         return out
 
+    def _ended_before(self, tp: TestPoint) -> tuple[float, str] | None:
+        """When the telemetry stops during ``tp``: whether its sweep was already over, as
+        ``(end [s], why)``: the chirp the autopilot was told to fly had ended, or the input a
+        detected sweep follows had been quiet for ``_QUIET_BEFORE_LOSS_S``. None: it was cut short."""
+        inj = tp.injection
+        last = tp.t0[-1] + tp.values[-1].shape[1] / self.fs if tp.values else tp.start_s   # its last sample [s]
+        if tp.source == "autopilot" and inj is not None and last - tp.start_s >= inj.duration_s - _CHIRP_END_TOL_S:
+            return tp.start_s + inj.duration_s, "the injection had ended"
+        det = self._sweep
+        if (tp.source == "sweep" and det is not None and det.active == tp.swept_input
+                and det.quiet_for >= _QUIET_BEFORE_LOSS_S):
+            return det.last_active_t, f"{tp.swept_input} quiet for {det.quiet_for} s"
+        return None
+
     def _marker(self, t_s, action, swept, note) -> TestPointEvent:
         swept = swept if swept in self.inputs else None
         return TestPointEvent(t_s, action.lower(), "marker", swept, note)
@@ -433,10 +454,16 @@ class TestPointTracker:
         if ev.action == "lost":
             cur = self.current
             if cur is not None:
-                cur.end_s, cur.end_note = max(ev.t_s, cur.start_s), ev.note
-                cur.lost = f"{ev.note} at {ev.t_s:.1f} s: the test point is incomplete; fly it again"
+                done = self._ended_before(cur)
+                if done is not None:                 # the sweep was over: judged as it is
+                    cur.end_s, cur.end_note = max(done[0], cur.start_s), f"{done[1]}; then {ev.note} at {ev.t_s:.1f} s"
+                else:
+                    cur.end_s, cur.end_note = max(ev.t_s, cur.start_s), ev.note
+                    cur.lost = f"{ev.note} at {ev.t_s:.1f} s: the test point is incomplete; fly it again"
                 self.closing.append(cur)
                 self.current = None
+                if self._sweep is not None:
+                    self._sweep.active = None
             return []
         out = []
         if ev.source != "sweep":

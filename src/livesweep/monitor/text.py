@@ -248,8 +248,8 @@ def _tp_section(number: int, tp: dict, t_s: float) -> list[str]:
 
 
 def test_point_line(number: int, tp: dict) -> str:
-    """One closed test point in a line: ``"TP1 roll (autopilot, 78.6-128.6 s): GO; p/roll 100 % of
-    3.14-75.4 rad/s adequate (+40 points)"``, and what a NO-GO still needs."""
+    """One closed test point in a line: ``"TP1 roll (autopilot, 78.6 s - 128.6 s): GO; p/roll 100 %
+    adequate of 3.14 – 75.4 rad/s (+40 points)"``, and what a NO-GO still needs."""
     start, end = _num(tp.get("start_s")), _num(tp.get("end_s"))
     span = f"{time_text(start)} - {time_text(end)}" if start is not None and end is not None else "?"
     head = f"TP{number} {tp.get('swept_input') or '?'} ({tp.get('source', '?')}, {span}): {tp.get('label') or tp.get('verdict')}"
