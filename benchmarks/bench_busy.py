@@ -12,8 +12,8 @@ baseline in the same run:
    * ``livesweep monitor --record --rerun-save``: the recorder process (the datagrams to the MCAP
      as received, then decoded to the JSON channels) and the analysis and Rerun view.
    A rate is lossless when every frame sent is in the recording (its JSON channels; the raw
-   datagram channel too) and the sender kept the rate. Printed: the highest lossless rate of each
-   and their ratio.
+   datagram channel too) and the sender kept the rate. Printed: the highest rate of each that was
+   lossless there and at every lower rate of the ladder, and their ratio.
 2. **A real SystemID chirp at about 2 000 msg/s for 60 s, with every core busy**: the shared
    ArduCopter SITL log (``sid_axis7_rate_roll.bin``) streamed as ArduCopter's telemetry at its
    own 400 Hz (``livesweep stream``, speed ``--sid-speed``) into ``livesweep monitor --map
@@ -107,6 +107,7 @@ def run_monitor(stream: Path, rate: float, seconds: float, tmp: Path) -> dict:
 
 def ladder(rates, seconds: float, flight, tmp: Path, label: str) -> dict:
     best = {"bare pymavlink parse": 0.0, "livesweep monitor": 0.0}
+    failed: set[str] = set()
     stream = tmp / "stream.bin"
     print(f"\n{label}: {seconds:g} s at each rate")
     print(f"{'rate msg/s':>10s} {'who':>22s} {'sent':>9s} {'recorded':>9s} {'kernel drops':>12s} {'shed':>6s} "
@@ -118,8 +119,10 @@ def ladder(rates, seconds: float, flight, tmp: Path, label: str) -> dict:
             r = fn()
             ok = r["recorded"] == r["sent"] and r.get("raw", r["sent"]) == r["sent"]
             kept = r["sent"] / r["send_wall_s"] >= 0.97 * rate
-            if ok and kept:
+            if ok and kept and who not in failed:          # lossless here and at every lower rate
                 best[who] = max(best[who], rate)
+            elif not (ok and kept):
+                failed.add(who)
             print(f"{rate:10.0f} {who:>22s} {r['sent']:9d} {r['recorded']:9d} {r['kernel_drops']:12d} "
                   f"{r.get('analysis_shed', 0):6d} {r.get('stop_s', float('nan')):6.1f}"
                   + ("" if kept else f"  (sender reached only {r['sent'] / r['send_wall_s']:.0f} msg/s)"))
