@@ -102,9 +102,11 @@ def test_new_case_from_a_systemid_log_is_identified(tmp_path, capsys):
     assert "exists; give --force" in capsys.readouterr().err
 
 
-def _sid_tlog(path, start_s: float, end_s: float) -> float:
+def _sid_tlog(path, start_s: float, end_s: float, more=()) -> float:
     """The SystemID log's telemetry as a ground station records it (a tlog: [uint64 BE us][frame]),
-    at the 50 Hz stream rate inspect suggests; returns the log's first TimeUS [s]."""
+    at the 50 Hz stream rate inspect suggests, from ``start_s`` to ``end_s``, then each further
+    ``(start, end, shift [s])`` slice of ``more`` recorded ``shift`` later; returns the log's first
+    TimeUS [s]."""
     import struct
 
     from livesweep.telemetry import mavlink_codec as codec
@@ -112,10 +114,11 @@ def _sid_tlog(path, start_s: float, end_s: float) -> float:
     from pymavlink.dialects.v20 import ardupilotmega as mav2
 
     mav = mav2.MAVLink(None, srcSystem=1, srcComponent=1)
-    msgs = dataflash_messages(DATA / "ardupilot_sitl_systemid" / "sid_axis7_rate_roll.bin", start_s=start_s,
-                              end_s=end_s, rate_hz=50.0)
+    log = DATA / "ardupilot_sitl_systemid" / "sid_axis7_rate_roll.bin"
+    msgs = dataflash_messages(log, start_s=start_s, end_s=end_s, rate_hz=50.0)
+    slices = [(msgs, 0.0), *((dataflash_messages(log, start_s=a, end_s=b, rate_hz=50.0), dt) for a, b, dt in more)]
     with open(path, "wb") as f:
-        for t, name, rec in msgs:
+        for t, name, rec in ((t + dt, name, rec) for sl, dt in slices for t, name, rec in sl):
             fields = {fl.name: rec.get(fl.name, 0) for fl in codec._spec(name).fields}
             for fl in codec._spec(name).fields:
                 if fl.kind == "char":
@@ -177,3 +180,20 @@ def test_a_dataflash_log_names_the_presets_for_its_streamed_telemetry(inspection
     live = {f.name: f for f in ins.fits if f.live}
     assert "would go at 10 Hz" in live["ardupilot-copter-quad-plus"].why
     assert live["ardupilot-copter-quad-x"].why.startswith("the vehicle is QUAD/PLUS")
+
+
+def test_a_signal_rate_is_the_one_during_the_systemid_runs_not_the_mean_over_gaps(tmp_path):
+    """The roll chirp's telemetry at 50 Hz, and the same again 300 s later, nothing between: the mean
+    rate over the log's span is about 17 Hz per axis, but PID_TUNING arrived at 50 Hz while the
+    chirps ran (the stream rate the test wrote), so the rate-loop preset fits."""
+    log = DATA / "ardupilot_sitl_systemid" / "sid_axis7_rate_roll.bin"
+    if not log.is_file():
+        pytest.skip("no SystemID roll log")
+    tlog = tmp_path / "gappy.tlog"
+    _sid_tlog(tlog, 20.0, 100.0, more=[(20.0, 100.0, 300.0)])
+    ins = inspect_log(tlog)
+    pid = next(t for t in ins.topics if t.topic == "/mavlink/PID_TUNING")
+    assert pid.rate_hz / 3 < 30.0                 # three axes: the mean over the span would reject the preset
+    assert len(ins.systemid) == 2 and all(run.data for run in ins.systemid)
+    fits = {f.name: f for f in ins.fits}
+    assert fits["ardupilot-copter-pid"].fits, fits["ardupilot-copter-pid"].why

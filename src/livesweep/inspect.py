@@ -236,13 +236,14 @@ class _Stats:
         self.runs: list[dict] = []                   # SystemID runs: start ns, end ns, axis, sids, params
         self.t0: int | None = None
         self.t_end: int | None = None
-        self.signals: dict[str, list] = {}           # key -> [extractor, n, min, max, first ns, last ns]
+        #: key -> [extractor, n, min, max, first ns, last ns, {second: samples in it}]
+        self.signals: dict[str, list] = {}
         self.by_topic: dict[str, list[str]] = {}
         for name, m, _ in maps:
             for sig, spec in m.signals.items():
                 key = f"{spec.topic}|{spec.field}|{spec.where}|{spec.sysid}|{spec.compid}"
                 if key not in self.signals:
-                    self.signals[key] = [compile_signal(spec), 0, math.inf, -math.inf, None, None]
+                    self.signals[key] = [compile_signal(spec), 0, math.inf, -math.inf, None, None, {}]
                     self.by_topic.setdefault(spec.topic, []).append(key)
 
     def take(self, topic: str, t_ns: int, data) -> None:
@@ -271,6 +272,8 @@ class _Stats:
                 s[3] = max(s[3], v)
                 s[4] = t_ns if s[4] is None else s[4]
                 s[5] = t_ns
+                sec = t_ns // 1_000_000_000
+                s[6][sec] = s[6].get(sec, 0) + 1
         if topic in ("/mavlink/PARAM_VALUE", "/dataflash/PARM", "/dataflash/SIDS", "/mavlink/STATUSTEXT",
                      "/dataflash/MSG", "/mavlink/HEARTBEAT", "/dataflash/MODE"):
             self._systemid(topic, t_ns, data)
@@ -364,6 +367,21 @@ def _frames(path: Path, fmt: str, tmp: Path, columns, notes: list):
                      + ", ".join(f"{n} {why}" for why, n in sorted(skipped.counts.items())))
 
 
+def _signal_rate(stats: _Stats, s: list) -> float:
+    """The rate a signal arrives at [Hz]: the median of its samples per second over the seconds of
+    the SystemID runs (what the verdict judges), else over the seconds it arrives in; a stream rate
+    raised after connecting, or a gap, does not pull it down."""
+    per_second = s[6]
+    secs = [k for r in stats.runs if r["end"] is not None
+            for k in range(r["start"] // 1_000_000_000 + 1, r["end"] // 1_000_000_000)]
+    counts = [per_second[k] for k in secs if k in per_second]
+    if len(counts) < 3:
+        counts = list(per_second.values())[1:-1]          # whole seconds only
+    if len(counts) < 3:
+        return _rate(s[1], s[4], s[5])
+    return float(sorted(counts)[len(counts) // 2])
+
+
 def _rate(n: int, first, last) -> float:
     span = (last - first) * 1e-9 if first is not None and last is not None else 0.0
     return (n - 1) / span if n > 1 and span > 0 else 0.0
@@ -393,7 +411,7 @@ def _fit(stats: _Stats, name: str, m, whole: bool, rates: dict | None = None, li
             have[sig] = None if r is None else (True, r)
             continue
         s = stats.signal(spec)
-        have[sig] = None if s[1] == 0 else (s[3] > s[2], _rate(s[1], s[4], s[5]))
+        have[sig] = None if s[1] == 0 else (s[3] > s[2], _signal_rate(stats, s))
     if not all(have[r] is not None and have[r][0] for r in sp.references or ()):
         return None
     ins = [i for i in sp.inputs if have[i] is not None and have[i][0]]
