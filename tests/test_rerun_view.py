@@ -366,6 +366,28 @@ def test_adequacy_table_fraction_and_alerts(recorded):
     assert [v[0] for _, v in levels] == ["WARN", "WARN"]
 
 
+def test_a_verdict_change_after_the_last_estimate_is_shown_at_once(tmp_path):
+    """A test point that closes after the last samples (the telemetry stopped) changes the verdict
+    with no estimate to follow: the status document shows the new verdict at its time, with the
+    last estimate's table; a verdict before any estimate waits for the first one."""
+    path = tmp_path / "v.rrd"
+    omega = np.logspace(0, 1, 20)
+    view = RerunView(["da"], ["p"], recording_id="verdict", save_path=path)
+    view.log_verdict(1.0, "WAIT", ["no test point yet"])
+    coh, mag, pha = (np.full((1, 1, 20), v) for v in (0.9, -3.0, -45.0))
+    rows = [{"output": "p", "input": "da", "band": (1.0, 10.0), "fraction": 1.0}]
+    view.log_estimate(4.0, omega, ["p"], ["da"], coh, mag, pha, rows, verdict="WAIT", reasons=["running"],
+                      sweep={"da": (5.0, 3.0)})
+    view.log_verdict(9.0, "NO-GO", ["last test point (da swept 2 s - 8 s): NO-GO", "telemetry lost"])
+    view.close()
+    docs = _rows(RrdReader(path).stream().to_chunks(), ADEQUACY_PATH, "TextDocument:text")
+    assert [t for t, _ in docs] == list(_ns([4.0, 9.0]))
+    last = docs[-1][1][0]
+    assert last.startswith("## NO-GO\n") and "**last test point (da swept 2 s - 8 s): NO-GO**" in last
+    assert "- telemetry lost" in last and "| p/da | 1 – 10 | 100 % | adequate |" in last
+    assert "- da: not sweeping" in last
+
+
 def test_sweep_frequency_and_time_remaining_series(recorded):
     t_ns = _ns(T_EST[1])
     f = _rows(recorded["chunks"], sweep_frequency_path("de"), "Scalars:scalars")

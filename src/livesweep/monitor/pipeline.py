@@ -647,6 +647,8 @@ class MonitorPipeline:
             self.publisher.publish("verdict", payload)
         if self.view is not None:
             self.view.log_alerts(t_s, [("verdict", f"{verdict}: {reasons[0] if reasons else ''}")])
+            if hasattr(self.view, "log_verdict"):
+                self.view.log_verdict(t_s, verdict, reasons)
         if self._cause_rx is not None and self._live:   # receipt of the oldest frame behind it -> shown and recorded
             self.totals.verdict_latency_s.append((receive_ns() - self._cause_rx) * 1e-9)
 

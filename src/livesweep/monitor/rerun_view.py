@@ -93,6 +93,7 @@ _COH_COLOR = (60, 190, 90)
 _MASKED_COLOR = (125, 125, 125, 200)
 _THRESHOLD_COLOR = (255, 165, 0)
 _GRID_COLOR = (150, 150, 150, 120)
+_BAND_EDGE_COLOR = (90, 90, 90)        # the judged band's edges on the sweep-frequency plot: seen at a glance
 _GRID_MINOR_COLOR = (150, 150, 150, 45)
 _TITLE_COLOR = (40, 40, 40)
 #: Line radii [ui points; Rerun encodes ui points as negative radii] of coherent and masked stretches.
@@ -415,6 +416,7 @@ class RerunView:
         self._focus: _PairState | None = None  # the swept pair of the test point (focus/)
         self._early_alerts: list = []          # alerts before any flight time: logged at the first one
         self._band_named = False
+        self._status: dict | None = None              # the last estimate's status table (re-shown on a verdict change)
 
         self.rec = rr.RecordingStream(application_id, recording_id=recording_id)
         self.rec.set_log_time_enabled(False)   # flight_time is the only timeline: replay == live
@@ -717,13 +719,28 @@ class RerunView:
             if not self._band_named:
                 self._band_named = True
                 for path, name in zip(BAND_EDGE_PATHS, ("band judged: bottom", "band judged: top")):
-                    rec.log(path, rr.SeriesLines(names=name, colors=[_GRID_COLOR]), static=True)
+                    rec.log(path, rr.SeriesLines(names=name, colors=[_BAND_EDGE_COLOR], widths=[2.0]), static=True)
             for path, edge in zip(BAND_EDGE_PATHS, band_rad_s or (None, None)):
                 rec.log(path, rr.Scalars(np.nan if edge is None else float(edge)))
+            self._status = {"rows": list(adequacy_rows), "coherence_kind": coherence_kind, "sweep": sweep}
             rec.log(ADEQUACY_PATH, rr.TextDocument(
                 adequacy_markdown(t_s, adequacy_rows, verdict, reasons, coherence_kind=coherence_kind, sweep=sweep,
                                   lag_s=lag_s),
                 media_type=rr.MediaType.MARKDOWN))
+
+    def log_verdict(self, t_s: float, verdict: str, reasons: Sequence[str]) -> None:
+        """A change of the operator's verdict between estimates (a test point closed after the last
+        samples): the status document shows it at once, with the last estimate's table."""
+        with self._lock:
+            self._check_open()
+            if self._status is None or t_s is None:      # before the first estimate: it will show the verdict
+                return
+            self._set_time(t_s)
+            st = self._status
+            sweep = {k: (None, None) for k in (st["sweep"] or {})}     # no sweep is tracked without samples
+            self.rec.log(ADEQUACY_PATH, rr.TextDocument(
+                adequacy_markdown(t_s, st["rows"], verdict, reasons, coherence_kind=st["coherence_kind"],
+                                  sweep=sweep), media_type=rr.MediaType.MARKDOWN))
 
     def _draw_pairs(self, w: np.ndarray, outputs: list, inputs: list, coh: np.ndarray, mag: np.ndarray,
                     pha: np.ndarray, coherence_kind: str) -> None:

@@ -175,6 +175,8 @@ def adequacy_markdown(t_s: float, rows: Sequence[dict], verdict: str, reasons: S
         v = r.get("verdict") or _row_verdict(frac, band, required_fraction)
         table.append([f"{r.get('output', '?')}/{r.get('input', '?')}", band_text(band),
                       percent(frac, required_fraction), v])
+    if table:
+        lines += ["Sliding window (what is happening now, not the verdict):", ""]
     lines += md_table(["pair", "adequate band [rad/s]", "fraction", "verdict"], table)
     return "\n".join(lines) + "\n"
 
