@@ -148,3 +148,35 @@ class CpuHog:
             p.kill()
         for p in self.procs:
             p.wait()
+
+
+def copy_mcap_without(src, out, leave_out) -> int:
+    """Copy an MCAP recording (schemas, channels, attachments, metadata) with the standard mcap
+    reader and writer, leaving out each message for which ``leave_out(topic, data)`` is true;
+    returns how many were left out."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    dropped = 0
+    with open(src, "rb") as f, open(out, "wb") as g:
+        r = make_reader(f)
+        w = Writer(g)
+        w.start(profile=r.get_header().profile, library="test")
+        schemas, channels = {}, {}
+        for schema, channel, msg in r.iter_messages(log_time_order=False):
+            if channel.id not in channels:
+                if schema is not None and schema.id not in schemas:
+                    schemas[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
+                channels[channel.id] = w.register_channel(channel.topic, channel.message_encoding,
+                                                          schemas.get(schema.id, 0) if schema else 0,
+                                                          dict(channel.metadata))
+            if leave_out(channel.topic, msg.data):
+                dropped += 1
+                continue
+            w.add_message(channels[channel.id], msg.log_time, msg.data, msg.publish_time, msg.sequence)
+        for a in r.iter_attachments():
+            w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
+        for m in r.iter_metadata():
+            w.add_metadata(m.name, dict(m.metadata))
+        w.finish()
+    return dropped

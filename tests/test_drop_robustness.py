@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers import copy_mcap_without
 from livesweep.cli import _monitor_settings, build_parser
 from livesweep.monitor.pipeline import MonitorPipeline
 from livesweep.telemetry import mavlink_codec as codec
@@ -35,31 +36,9 @@ def _settings(*args):
 
 def _drop(src: Path, out: Path, fraction: float, seed: int) -> int:
     """Copy a recording without ``fraction`` of its messages (livesweep's own results aside)."""
-    from mcap.reader import make_reader
-    from mcap.writer import Writer
-
     rng = np.random.default_rng(seed)
-    dropped = 0
-    with open(src, "rb") as f, open(out, "wb") as g:
-        r = make_reader(f)
-        w = Writer(g)
-        w.start(profile=r.get_header().profile, library="test")
-        schemas, channels = {}, {}
-        for schema, channel, msg in r.iter_messages(log_time_order=False):
-            if channel.id not in channels:
-                if schema is not None and schema.id not in schemas:
-                    schemas[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
-                channels[channel.id] = w.register_channel(channel.topic, channel.message_encoding,
-                                                          schemas.get(schema.id, 0) if schema else 0,
-                                                          dict(channel.metadata))
-            if not channel.topic.startswith("/livesweep/") and rng.random() < fraction:
-                dropped += 1
-                continue
-            w.add_message(channels[channel.id], msg.log_time, msg.data, msg.publish_time, msg.sequence)
-        for a in r.iter_attachments():
-            w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
-        w.finish()
-    return dropped
+    return copy_mcap_without(src, out, lambda topic, data: not topic.startswith("/livesweep/")
+                             and rng.random() < fraction)
 
 
 def _verdicts(log: Path, settings) -> list[tuple]:

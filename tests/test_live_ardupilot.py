@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers import CpuHog
+from helpers import CpuHog, copy_mcap_without
 from livesweep.telemetry.mcap_log import read_messages
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -241,36 +241,11 @@ def test_a_chirp_cut_to_a_third_is_no_go_naming_the_band_never_swept_and_the_los
 
 
 def _without_system(path: Path, out: Path, sysid: int) -> int:
-    """Copy a recording (schemas, channels, attachments, metadata) without the messages of
-    ``sysid``, with the standard mcap reader and writer; returns how many were left out."""
+    """Copy a recording without the messages of ``sysid``; returns how many were left out."""
     import json
 
-    from mcap.reader import make_reader
-    from mcap.writer import Writer
-
-    dropped = 0
-    with open(path, "rb") as f, open(out, "wb") as g:
-        r = make_reader(f)
-        w = Writer(g)
-        w.start(profile=r.get_header().profile, library="test")
-        schemas, channels = {}, {}
-        for schema, channel, msg in r.iter_messages(log_time_order=False):
-            if channel.id not in channels:
-                if schema is not None and schema.id not in schemas:
-                    schemas[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
-                channels[channel.id] = w.register_channel(channel.topic, channel.message_encoding,
-                                                          schemas.get(schema.id, 0) if schema else 0,
-                                                          dict(channel.metadata))
-            if channel.topic.startswith("/mavlink/") and json.loads(msg.data).get("sysid") == sysid:
-                dropped += 1
-                continue
-            w.add_message(channels[channel.id], msg.log_time, msg.data, msg.publish_time, msg.sequence)
-        for a in r.iter_attachments():
-            w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
-        for m in r.iter_metadata():
-            w.add_metadata(m.name, dict(m.metadata))
-        w.finish()
-    return dropped
+    return copy_mcap_without(path, out, lambda topic, data: topic.startswith("/mavlink/")
+                             and json.loads(data).get("sysid") == sysid)
 
 
 def test_a_second_vehicle_on_the_link_changes_no_test_point(runs, tmp_path):
