@@ -107,10 +107,34 @@ def test_fuzz_two_vehicles_garbage_poison_stamps_and_a_forged_frame(tmp_path):
     corrupted, unsigned, forged and replayed frames and stamps no clock has: every valid frame is
     recorded, every bad one counted for what it is, nothing dropped by the kernel."""
     with CpuHog():
-        _fuzz(tmp_path)
+        out, valid, sent_bad, text, rss = _fuzz(tmp_path)
+    # every valid frame is in the recording, which any MCAP reader opens (finished by SIGTERM)
+    assert mavlink_counts(out) == valid
+    s = read_summary(out)
+    assert s.complete
+    counters = json.loads(s.metadata[COUNTERS_METADATA]["sources"])[0]
+    assert counters["kernel_drops"] == 0
+    assert counters["bad_crc"] == sent_bad["bad_crc"]
+    assert counters["bad_prefix_or_garbage"] >= sent_bad["garbage"]
+    assert counters["rejected_unsigned"] == sent_bad["unsigned"]
+    assert counters["bad_signature"] == sent_bad["forged"] + sent_bad["replayed"]
+    assert counters["replayed_signature"] == sent_bad["replayed"]
+    assert counters["clock_unrepresentable"] + counters["clock_implausible"] == sent_bad["poison_stamp"]
+    assert counters["seq_gaps"] == {} and counters["seq_repeats"] == 0
+    assert counters["by_system"] == {"1": sum(v for (_, sy), v in valid.items() if sy == 1),
+                                     "2": sum(v for (_, sy), v in valid.items() if sy == 2)}
+    # ... also counted live: on /livesweep/link, as link alerts, and in the printed summary
+    links = [m.data for m in read_messages(out, topics="/livesweep/link")]
+    assert links and links[-1]["sources"][0]["bad_crc"] == sent_bad["bad_crc"]
+    kinds = Counter(m.data["kind"] for m in read_messages(out, topics="/livesweep/alert"))
+    assert kinds["link"] >= 2                    # the anomalies, and the second system
+    assert f"'bad_crc': {sent_bad['bad_crc']}" in text and "systems {1:" in text
+    assert rss < 500, f"peak RSS {rss:.0f} MB"
 
 
 def _fuzz(tmp_path):
+    """Send the fuzz stream to a monitor and stop it; returns (recording, valid frames sent per
+    (type, sysid), bad frames sent per kind, the monitor's printed summary, its peak RSS [MB])."""
     rng = np.random.default_rng(2026)
     key_file = tmp_path / "key.bin"
     key_file.write_bytes(KEY)
@@ -178,29 +202,7 @@ def _fuzz(tmp_path):
     assert mon.returncode == 0, stderr.decode()
     print(f"\nfuzz: {len(datagrams)} datagrams, {sum(valid.values())} valid frames, bad sent {dict(sent_bad)}, "
           f"peak RSS {rss:.0f} MB\n{stdout.decode()}")
-    # every valid frame is in the recording, which any MCAP reader opens (finished by SIGTERM)
-    assert mavlink_counts(out) == valid
-    s = read_summary(out)
-    assert s.complete
-    counters = json.loads(s.metadata[COUNTERS_METADATA]["sources"])[0]
-    assert counters["kernel_drops"] == 0
-    assert counters["bad_crc"] == sent_bad["bad_crc"]
-    assert counters["bad_prefix_or_garbage"] >= sent_bad["garbage"]
-    assert counters["rejected_unsigned"] == sent_bad["unsigned"]
-    assert counters["bad_signature"] == sent_bad["forged"] + sent_bad["replayed"]
-    assert counters["replayed_signature"] == sent_bad["replayed"]
-    assert counters["clock_unrepresentable"] + counters["clock_implausible"] == sent_bad["poison_stamp"]
-    assert counters["seq_gaps"] == {} and counters["seq_repeats"] == 0
-    assert counters["by_system"] == {"1": sum(v for (_, sy), v in valid.items() if sy == 1),
-                                     "2": sum(v for (_, sy), v in valid.items() if sy == 2)}
-    # ... also counted live: on /livesweep/link, as link alerts, and in the printed summary
-    links = [m.data for m in read_messages(out, topics="/livesweep/link")]
-    assert links and links[-1]["sources"][0]["bad_crc"] == sent_bad["bad_crc"]
-    kinds = Counter(m.data["kind"] for m in read_messages(out, topics="/livesweep/alert"))
-    assert kinds["link"] >= 2                    # the anomalies, and the second system
-    text = stdout.decode()
-    assert f"'bad_crc': {sent_bad['bad_crc']}" in text and "systems {1:" in text
-    assert rss < 500, f"peak RSS {rss:.0f} MB"
+    return out, valid, sent_bad, stdout.decode(), rss
 
 
 # ----------------------------------------------------------------------------- stop, overwrite, lock
