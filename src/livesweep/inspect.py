@@ -24,12 +24,13 @@ from __future__ import annotations
 
 import json
 import math
-import re
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from livesweep.errors import ConfigError
+from livesweep.monitor.systemid import SAME_START_S, SystemIdWatch, better_injection
+from livesweep.spectral.test_point import NYQUIST_FRACTION
 
 __all__ = ["TopicInfo", "MapFit", "SystemIdRun", "LogInspection", "inspect_log", "format_inspection",
            "STREAM_RATE_HZ"]
@@ -38,9 +39,10 @@ __all__ = ["TopicInfo", "MapFit", "SystemIdRun", "LogInspection", "inspect_log",
 MAX_FIELDS = 40
 #: A log shorter than this [s] is said to be too short for a frequency response.
 SHORT_S = 10.0
-#: A signal must arrive at this many times the top frequency it must show (the judged band ends at
-#: 0.8 of the grid's Nyquist frequency, and a signal sampled slower aliases what lies above).
-RATE_PER_TOP_FREQUENCY = 2.5
+#: A signal must arrive at this many times the top frequency it must show (2.5: the verdict judges
+#: a signal up to NYQUIST_FRACTION = 0.8 of its Nyquist frequency, and one sampled slower aliases
+#: what lies above).
+RATE_PER_TOP_FREQUENCY = 2.0 / NYQUIST_FRACTION
 #: The stream rate suggested for a DataFlash log's telemetry (``livesweep stream --rate-hz``; a
 #: telemetry stream rate such as SRx_EXTRA1 = 50) [Hz].
 STREAM_RATE_HZ = 50.0
@@ -51,8 +53,6 @@ _STREAM_OF_DATAFLASH = {"/mavlink/ATTITUDE": ("/dataflash/ATT", "/dataflash/RATE
                         "/mavlink/RAW_IMU": ("/dataflash/IMU",), "/mavlink/HEARTBEAT": (),
                         "/mavlink/STATUSTEXT": ("/dataflash/MSG",), "/mavlink/PARAM_VALUE": ("/dataflash/PARM",)}
 _PID_RECORDS = {1: "/dataflash/PIDR", 2: "/dataflash/PIDP", 3: "/dataflash/PIDY"}
-_START = re.compile(r"SystemID Starting: axis=(\d+)")
-_FINISHED = re.compile(r"SystemID Finished")
 
 
 @dataclass(frozen=True)
@@ -233,7 +233,8 @@ class _Stats:
         self._vehicles: dict = {}                    # sysid -> VehicleInfo: the log's main system is judged
         self._frames_by_system: dict = {}            # sysid -> frames (the main system sends the most)
         self._new_vehicle = VehicleInfo
-        self.runs: list[dict] = []                   # SystemID runs: start ns, end ns, axis, sids, params
+        self.runs: list[dict] = []                   # SystemID runs: start ns, end ns, axis, injection
+        self._watches: dict = {}                     # sysid -> SystemIdWatch
         self.t0: int | None = None
         self.t_end: int | None = None
         #: key -> [extractor, n, min, max, first ns, last ns, {second: samples in it}]
@@ -292,24 +293,20 @@ class _Stats:
         v = self._vehicles.get(sysid)
         if v is None:
             v = self._vehicles[sysid] = self._new_vehicle()
+            self._watches[sysid] = SystemIdWatch()
         v.take(_Frame(topic, d))
-        if sysid is not None and sysid != self._main():
+        ev = self._watches[sysid].feed(topic, d, v)
+        if ev is None or (sysid is not None and sysid != self._main()):
             return                               # SystemID runs of the main system only
-        text = str(d.get("text", d.get("Message", ""))) if topic in ("/mavlink/STATUSTEXT", "/dataflash/MSG") else ""
-        last = self.runs[-1] if self.runs else None
-        if (m := _START.search(text)) or topic == "/dataflash/SIDS":
-            axis = int(m.group(1)) if m else d.get("Ax")
-            sids = d if topic == "/dataflash/SIDS" else None
-            if last is not None and last["end"] is None and abs(t_ns - last["start"]) < 2e9:
-                last["sids"] = last["sids"] or sids                  # the same start: MSG and SIDS
-                return
-            self.runs.append({"start": t_ns, "end": None, "axis": axis, "sids": sids,
-                              "injection": v.injection(axis, sids=sids)})
-        elif _FINISHED.search(text) and last is not None and last["end"] is None:
-            last["end"] = t_ns
-        if last is not None and last.get("sids") and (last.get("injection") is None
-                                                       or last["injection"].source != "SIDS"):
-            last["injection"] = v.injection(last["axis"], sids=last["sids"])
+        last = self.runs[-1] if self.runs and self.runs[-1]["end"] is None else None
+        if ev.action == "end":
+            if last is not None:
+                last["end"] = t_ns
+        elif last is not None and abs(t_ns - last["start"]) < SAME_START_S * 1e9:    # the same start, said again
+            last["axis"] = ev.axis if last["axis"] is None else last["axis"]
+            last["injection"] = better_injection(last["injection"], ev.injection)
+        else:
+            self.runs.append({"start": t_ns, "end": None, "axis": ev.axis, "injection": ev.injection})
 
     def signal(self, spec):
         return self.signals[f"{spec.topic}|{spec.field}|{spec.where}|{spec.sysid}|{spec.compid}"]

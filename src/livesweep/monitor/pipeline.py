@@ -603,7 +603,8 @@ class MonitorPipeline:
                 not hasattr(self.view, "log_focus"):
             return
         p = j.pairs[0]
-        self.view.log_focus(t_s, p.response, f"{p.output}/{p.input}: {j.label} ({j.progress()})")
+        label = rec["label"] if rec["state"] == "closed" else (rec.get("running") or j.label)   # as the record says
+        self.view.log_focus(t_s, p.response, f"{p.output}/{p.input}: {label} ({j.progress()})")
 
     def _operator_verdict(self, rec: dict | None = None) -> tuple[str, tuple, dict | None]:
         """(verdict, reasons, the test point it is about): from the test point record just made, else

@@ -44,13 +44,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from livesweep.monitor.vehicle import MULTIROTOR_TYPES, VehicleInfo, axis_name
+from livesweep.monitor.systemid import SAME_START_S, SystemIdWatch, better_injection
+from livesweep.monitor.systemid import TOPICS as SYSTEMID_TOPICS
+from livesweep.monitor.vehicle import VehicleInfo, axis_name
 from livesweep.spectral.injection import SweepInjection
 from livesweep.spectral.test_point import TestPointJudgement, judge_test_point
 from livesweep.telemetry.frames import Frame
 
 __all__ = ["TestPointEvent", "TestPoint", "TestPointTracker", "SOURCES", "MARKER_TOPIC", "LOST_TOPIC",
-           "ARDUPILOT_SYSTEMID_MODE", "JUDGE_EVERY_S", "MAX_TEST_POINT_S", "LOST_AFTER_S"]
+           "JUDGE_EVERY_S", "MAX_TEST_POINT_S", "LOST_AFTER_S"]
 
 SOURCES = ("autopilot", "marker", "sweep")
 #: Topic of the operator's terminal markers (recorded, so a replay sees them).
@@ -69,8 +71,6 @@ _CHIRP_END_TOL_S = 0.5
 GCS_SYSID = 255
 #: HEARTBEAT ``type`` of a ground station.
 MAV_TYPE_GCS = 6
-#: ArduCopter's flight-mode number of SYSTEMID (custom_mode of HEARTBEAT, Mode of DataFlash MODE).
-ARDUPILOT_SYSTEMID_MODE = 25
 #: How near a grid sample a time may be and still count as on it [fraction of a sample period].
 #: Times are seconds on the vehicle clock or, for receive-time maps, since the UNIX epoch, where
 #: float64 resolves 2.4e-7 s: a grid time computed two ways (a block's start plus k / fs, a record's
@@ -94,8 +94,6 @@ PRE_TEST_S = 20.0
 #: Sweep detection confirms a start within this long of it, or gives up (a slow ramp is no sweep) [s].
 _MAX_DETECTION_S = 60.0
 
-_START = re.compile(r"SystemID Starting: axis=(\d+)")
-_FINISHED = re.compile(r"SystemID Finished")
 _MARKER_TEXT = re.compile(r"^\s*(?:livesweep|testpoint)\s*:?\s*(start|end)(?:\s+(\S+))?", re.I)
 
 
@@ -335,7 +333,7 @@ class TestPointTracker:
         self.explicit = False                        # an autopilot or marker event was seen
         self._pre = deque()                          # (t0, values, valid) blocks of the recent past
         self._sweep = _SweepDetector(self.inputs, self.fs) if "sweep" in self.sources else None
-        self._modes: dict = {}                       # (topic, sysid) -> last mode
+        self._systemid = SystemIdWatch()             # the analysed vehicle's SystemID runs
         self._ground_stations: set = {GCS_SYSID}     # systems whose HEARTBEAT says MAV_TYPE_GCS
         self._last_end: float | None = None          # end of the last test point [s]
         self.ignored = 0                             # detected activity shorter than a test point
@@ -385,40 +383,13 @@ class TestPointTracker:
             silent = d.get("silent_s")
             silent = f" (no frame for {silent:.1f} s)" if isinstance(silent, (int, float)) else ""
             out.append(TestPointEvent(t_s, "lost", "monitor", note=f"telemetry lost{silent}"))
+        elif auto and topic in SYSTEMID_TOPICS and (ev := self._systemid.feed(topic, d, self.vehicle)) is not None:
+            out.append(TestPointEvent(t_s, ev.action, "autopilot", None if ev.axis is None else self.axes.get(ev.axis),
+                                      ev.note, injection=ev.injection, axis=ev.axis))
         elif topic in ("/mavlink/STATUSTEXT", "/dataflash/MSG"):
             text = str(d.get("text", d.get("Message", "")))
-            if auto and (m := _START.search(text)):
-                axis = int(m.group(1))
-                out.append(TestPointEvent(t_s, "start", "autopilot", self.axes.get(axis), text,
-                                          injection=self.vehicle.injection(axis), axis=axis))
-            elif auto and _FINISHED.search(text):
-                out.append(TestPointEvent(t_s, "end", "autopilot", note=text))
-            elif marker and (m := _MARKER_TEXT.match(text)):
+            if marker and (m := _MARKER_TEXT.match(text)):
                 out.append(self._marker(t_s, m.group(1), m.group(2), f"text: {text}"))
-        elif topic == "/dataflash/SIDS" and auto:
-            ax = d.get("Ax")
-            if isinstance(ax, (int, float)):
-                axis = int(ax)
-                out.append(TestPointEvent(t_s, "start", "autopilot", self.axes.get(axis), f"SIDS axis {axis}",
-                                          injection=self.vehicle.injection(axis, sids=d), axis=axis))
-        elif topic in ("/mavlink/HEARTBEAT", "/dataflash/MODE") and auto:
-            if topic == "/mavlink/HEARTBEAT":
-                if d.get("autopilot") != 3 or d.get("type") not in MULTIROTOR_TYPES:
-                    return []
-                mode = d.get("custom_mode")
-            else:
-                mode = d.get("Mode")
-            key = (topic, sysid)
-            before = self._modes.get(key)
-            self._modes[key] = mode
-            if before == ARDUPILOT_SYSTEMID_MODE and mode != ARDUPILOT_SYSTEMID_MODE:
-                out.append(TestPointEvent(t_s, "end", "autopilot", note=f"mode {before} -> {mode}"))
-            elif before is not None and before != ARDUPILOT_SYSTEMID_MODE and mode == ARDUPILOT_SYSTEMID_MODE:
-                axis = self.vehicle.parameters.get("SID_AXIS")
-                axis = None if axis is None else int(round(axis))
-                out.append(TestPointEvent(t_s, "start", "autopilot", None if axis is None else self.axes.get(axis),
-                                          note=f"mode {before} -> {mode} (SYSTEMID)",
-                                          injection=None if axis is None else self.vehicle.injection(axis), axis=axis))
         elif topic == "/mavlink/NAMED_VALUE_INT" and marker and str(d.get("name", "")).strip() == "LS_TP":
             v = d.get("value")
             if isinstance(v, int):
@@ -483,7 +454,7 @@ class TestPointTracker:
                 self.current = None
             return out
         if cur is not None:
-            if cur.start_s >= ev.t_s - 2.0:
+            if cur.start_s >= ev.t_s - SAME_START_S:
                 # the same start seen twice (a STATUSTEXT and a mode change, MSG and SIDS): keep the
                 # first, take the input, the axis and the sweep from whichever names them (SIDS
                 # carries the sweep's own parameters: it wins)
@@ -492,8 +463,7 @@ class TestPointTracker:
                 if cur.axis is None and ev.axis is not None:
                     cur.axis = ev.axis
                     cur.unjudged = self._unjudged(ev)
-                if ev.injection is not None and (cur.injection is None or ev.injection.source == "SIDS"):
-                    cur.injection = ev.injection
+                cur.injection = better_injection(cur.injection, ev.injection)
                 return out + [(ev.t_s, cur.record("open"))]
             cur.end_s, cur.end_note = ev.t_s, f"a new test point started ({ev.note})"
             self.closing.append(cur)

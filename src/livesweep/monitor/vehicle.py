@@ -25,7 +25,8 @@ from livesweep.errors import ConfigError
 from livesweep.spectral.injection import SweepInjection, ardupilot_chirp
 from livesweep.telemetry.frames import Frame
 
-__all__ = ["VehicleInfo", "AXIS_NAMES", "FRAME_CLASSES", "FRAME_TYPES", "axis_name", "frame_name", "TOPICS"]
+__all__ = ["VehicleInfo", "ARDUPILOT_AUTOPILOT", "MULTIROTOR_TYPES", "FRAME_CLASS_MAV_TYPES",
+           "frame_of_text", "AXIS_NAMES", "FRAME_CLASSES", "FRAME_TYPES", "axis_name", "frame_name", "TOPICS"]
 
 #: ArduCopter SystemID axes (``SID_AXIS``, mode_systemid.h ``AxisType``).
 AXIS_NAMES = {1: "input roll (angle)", 2: "input pitch (angle)", 3: "input yaw (rate)", 4: "recovery roll",
@@ -41,10 +42,21 @@ FRAME_TYPES = {0: "PLUS", 1: "X", 2: "V", 3: "H", 4: "V_TAIL", 5: "A_TAIL", 10: 
 TOPICS = ("/mavlink/PARAM_VALUE", "/dataflash/PARM", "/dataflash/SIDS", "/mavlink/STATUSTEXT", "/dataflash/MSG",
           "/mavlink/HEARTBEAT")
 
-#: MAV_TYPE of the multirotors whose frame FRAME_CLASS / FRAME_TYPE name (quad, coax, heli, hexa, octo, tri, dodeca, deca).
-MULTIROTOR_TYPES = {2, 3, 4, 13, 14, 15, 29, 35}
+#: ArduCopter's frame class as its "Frame: CLASS/TYPE" text names it -> the HEARTBEAT's MAV_TYPE
+#: (GCS_Copter::frame_type).
+FRAME_CLASS_MAV_TYPES = {"QUAD": 2, "HEXA": 13, "Y6": 13, "OCTA": 14, "OCTAQUAD": 14, "TRI": 15, "HELI": 4,
+                         "HELI_DUAL": 4, "HELI_QUAD": 4, "SINGLE": 3, "COAX": 3, "DODECAHEXA": 29, "DECA": 35}
+#: MAV_TYPE of the multirotors whose frame FRAME_CLASS / FRAME_TYPE name.
+MULTIROTOR_TYPES = frozenset(FRAME_CLASS_MAV_TYPES.values())
 _FRAME_TEXT = re.compile(r"^Frame:\s*([A-Z0-9_]+)(?:/([A-Z0-9_]+))?")
-_AUTOPILOT_ARDUPILOT = 3
+
+
+def frame_of_text(text: str) -> tuple[str, str | None] | None:
+    """ArduPilot's "Frame: QUAD/PLUS" text -> ``("QUAD", "PLUS")``; None for any other text."""
+    m = _FRAME_TEXT.match(str(text).strip())
+    return (m.group(1), m.group(2)) if m else None
+#: HEARTBEAT ``autopilot`` of ArduPilot (MAV_AUTOPILOT_ARDUPILOTMEGA).
+ARDUPILOT_AUTOPILOT = 3
 _GCS_AUTOPILOT = 8                      # MAV_AUTOPILOT_INVALID: a ground station's heartbeat
 
 
@@ -102,9 +114,9 @@ class VehicleInfo:
         elif topic == "/dataflash/SIDS":
             self.sids = dict(d)
         elif topic in ("/mavlink/STATUSTEXT", "/dataflash/MSG"):
-            m = _FRAME_TEXT.match(str(d.get("text", d.get("Message", ""))))
-            if m:
-                self.frame_text = (m.group(1), m.group(2))
+            frame = frame_of_text(d.get("text", d.get("Message", "")))
+            if frame is not None:
+                self.frame_text = frame
         elif topic == "/mavlink/HEARTBEAT":
             if d.get("autopilot") not in (None, _GCS_AUTOPILOT) and isinstance(d.get("type"), int):
                 self.mav_type = d["type"]

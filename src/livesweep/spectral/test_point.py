@@ -59,7 +59,7 @@ from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW
 from livesweep.spectral.windows import longest_window_samples
 
 __all__ = ["PairJudgement", "TestPointJudgement", "judge_test_point", "REQUIRED_FRACTION", "LOW_FREQUENCY_PERIODS",
-           "NYQUIST_FRACTION", "MARGINAL_SIGMAS", "coherence_sigma"]
+           "NYQUIST_FRACTION", "MARGINAL_SIGMAS", "coherence_sigma", "shows_up_to_rad_s"]
 
 #: Periods of its lowest frequency a sweep needs to resolve it (docs/method.md §2.5, T_rec >= 4-5 T_max).
 LOW_FREQUENCY_PERIODS = 4.0
@@ -76,6 +76,12 @@ _MIN_SWEPT_DECADES = 0.05
 #: records, eight seeds), its error was 1.5 of the sigma its random error predicts (and biased
 #: +0.5 of it). tests/test_judgement.py judges the bracket on another system and other seeds.
 MARGINAL_SIGMAS = 1.5
+
+
+def shows_up_to_rad_s(rate_hz: float) -> float:
+    """The top of the band a signal arriving at ``rate_hz`` [Hz] can show [rad/s]: ``NYQUIST_FRACTION``
+    of its Nyquist frequency (the judged band ends there on the analysis grid too)."""
+    return NYQUIST_FRACTION * math.pi * float(rate_hz)
 
 
 def coherence_sigma(coherence: np.ndarray, random_error: np.ndarray) -> np.ndarray:
@@ -449,11 +455,12 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
         if not ok:
             missing += [_describe_gap(pair, ga, gb, lo, j_hi, resolvable, duration)
                         for ga, gb in _gaps(p.bands_rad_s, lo, j_hi)]
-        for sig in (swept_input, o):
-            rate = (source_rates_hz or {}).get(sig)
-            if rate and math.pi * rate < j_hi and not ok:
-                reasons.append(f"{sig} arrives at {rate:.3g} Hz: it cannot show above {math.pi * rate:.3g} rad/s "
-                               "(half its rate); send it faster")
+    failing = [p.output for p in pairs if p.adequate_fraction < required_fraction]
+    for sig in dict.fromkeys([swept_input, *failing] if failing else []):   # each signal once
+        rate = (source_rates_hz or {}).get(sig)
+        if rate and shows_up_to_rad_s(rate) < j_hi:
+            reasons.append(f"{sig} arrives at {rate:.3g} Hz: it cannot show above {shows_up_to_rad_s(rate):.3g} "
+                           f"rad/s ({NYQUIST_FRACTION:g} of its Nyquist frequency); send it faster")
 
     excited = None if swept_bands is None else _log_fraction(swept_bands, lo, j_hi)
     if excited is None:

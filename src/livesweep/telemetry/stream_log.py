@@ -80,6 +80,7 @@ from typing import Any, Callable, Iterator, Mapping
 from livesweep.convert.common import sniff_format
 from livesweep.errors import ConfigError, LogFormatError
 from livesweep.telemetry.mavlink_out import MavlinkSender, parse_url, stream_records
+from livesweep.monitor.vehicle import ARDUPILOT_AUTOPILOT, FRAME_CLASS_MAV_TYPES, frame_of_text
 
 __all__ = ["LogMessages", "StreamSummary", "dataflash_messages", "sniff_log", "stream_log", "tlog_messages"]
 
@@ -87,15 +88,11 @@ _FORMAT_NAMES = {"tlog": "MAVLink tlog", "dataflash": "ArduPilot DataFlash"}
 
 # MAVLink constants (common.xml), as ArduCopter uses them
 _MAV_TYPE_QUADROTOR = 2
-_MAV_AUTOPILOT_ARDUPILOTMEGA = 3
 _BASE_MODE = 1 | 16 | 64            # CUSTOM_MODE_ENABLED | STABILIZE_ENABLED | MANUAL_INPUT_ENABLED
 _SAFETY_ARMED = 128
 _MAV_STATE_STANDBY, _MAV_STATE_ACTIVE = 3, 4
 _MAV_SEVERITY_INFO = 6
 _STATUSTEXT_LEN = 50
-# ArduCopter's frame class (the "Frame: CLASS/TYPE" message) -> MAV_TYPE (GCS_Copter::frame_type)
-_FRAME_TYPES = {"QUAD": 2, "HEXA": 13, "Y6": 13, "OCTA": 14, "OCTAQUAD": 14, "TRI": 15, "HELI": 4,
-                "HELI_DUAL": 4, "HELI_QUAD": 4, "SINGLE": 3, "COAX": 3, "DODECAHEXA": 29, "DECA": 35}
 # DataFlash EV ids (AP_Logger LogEvent)
 _EV_ARMED, _EV_DISARMED, _EV_LAND_COMPLETE, _EV_NOT_LANDED = 10, 11, 18, 28
 _PID_AXES = {"PIDR": 1, "PIDP": 2, "PIDY": 3, "PIDA": 4}     # PID_TUNING_ROLL .. PID_TUNING_ACCZ
@@ -325,12 +322,12 @@ class _Vehicle:
                 self.landed = False
         elif name == "MSG":
             text = str(v.get("Message", ""))
-            if text.startswith("Frame: "):
-                frame_class = text[7:].split("/", 1)[0].strip().upper()
-                self.mav_type = _FRAME_TYPES.get(frame_class, self.mav_type)
+            frame = frame_of_text(text)
+            if frame is not None:
+                self.mav_type = FRAME_CLASS_MAV_TYPES.get(frame[0], self.mav_type)
 
     def heartbeat(self) -> dict:
-        return {"type": self.mav_type, "autopilot": _MAV_AUTOPILOT_ARDUPILOTMEGA,
+        return {"type": self.mav_type, "autopilot": ARDUPILOT_AUTOPILOT,
                 "base_mode": _BASE_MODE | (_SAFETY_ARMED if self.armed else 0), "custom_mode": self.mode,
                 "system_status": _MAV_STATE_STANDBY if self.landed else _MAV_STATE_ACTIVE, "mavlink_version": 3}
 
