@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from livesweep.telemetry import mavlink_codec as codec  # noqa: F401  (MAVLink 2 before pymavlink loads)
-from livesweep.telemetry.capture import EVENT_MESSAGES, LiveCapture, frame_msgids
+from livesweep.telemetry.capture import EVENT_MESSAGES, LiveCapture, frame_heads
 from livesweep.telemetry.mcap_log import read_messages, read_summary
 from livesweep.telemetry.recorder import RAW_TOPIC
 from pymavlink.dialects.v20 import ardupilotmega as mav2
@@ -47,7 +47,7 @@ def _frames(n: int, seed: int, signed: bool = False) -> list[bytes]:
 
 
 @pytest.mark.parametrize("signed", [False, True])
-def test_message_ids_from_the_headers_are_pymavlinks(signed):
+def test_message_and_system_ids_from_the_headers_are_pymavlinks(signed):
     """Datagrams of one to three frames: the ids read from the headers alone are the ones pymavlink
     decodes; bytes that do not frame as MAVLink say so (None)."""
     frames = _frames(300, 1, signed)
@@ -60,13 +60,13 @@ def test_message_ids_from_the_headers_are_pymavlinks(signed):
         group = frames[k:k + 1 + k % 3]
         k += len(group)
         data = b"".join(group)
-        want = [m.get_msgId() for m in parser.parse_buffer(data) or ()]
-        assert frame_msgids(data) == want
-    assert frame_msgids(b"\x00garbage") is None
+        want = [(m.get_msgId(), m.get_srcSystem()) for m in parser.parse_buffer(data) or ()]
+        assert frame_heads(data) == want
+    assert frame_heads(b"\x00garbage") is None
     v1 = mav2.MAVLink_heartbeat_message(2, 3, 81, 25, 4, 3)
     m1 = mav2.MAVLink(None)
     m1.WIRE_PROTOCOL_VERSION = "1.0"
-    assert frame_msgids(bytes(v1.pack(m1, force_mavlink1=True))) == [0]
+    assert frame_heads(bytes(v1.pack(m1, force_mavlink1=True))) == [(0, 0)]   # id 0 from system 0
 
 
 def test_every_datagram_is_recorded_as_received_and_test_point_evidence_is_never_shed(tmp_path):
@@ -95,12 +95,12 @@ def test_every_datagram_is_recorded_as_received_and_test_point_evidence_is_never
                 break
     finally:
         cap.close()
-    events = [d for d in frames if frame_msgids(d)[0] in EVENT_MESSAGES]
+    events = [d for d in frames if frame_heads(d)[0][0] in EVENT_MESSAGES]
     got_events = [f for f in got if f.topic.rsplit("/", 1)[1] in EVENT_MESSAGES.values()]
     assert len(got_events) == len(events)                        # never shed
     assert sum(f.topic == "/mavlink/PID_TUNING" for f in got) == 1   # not wanted: its first frame only
     counts = cap.counts
-    attitude_sent = sum(frame_msgids(d)[0] == 30 for d in frames)
+    attitude_sent = sum(frame_heads(d)[0][0] == 30 for d in frames)
     attitude_got = sum(f.topic == "/mavlink/ATTITUDE" for f in got)
     assert counts["analysis_shed"] > 0                            # the analysis fell behind ...
     assert counts["analysis_shed"] == attitude_sent - attitude_got   # ... and every frame it missed is counted

@@ -411,3 +411,17 @@ def test_slow_analysis_sheds_frames_but_the_recording_keeps_every_one(tmp_path):
     n_other_topics = len({name for name, _ in frames if f"/mavlink/{name}" not in wanted})  # their first frames
     shed = summary["counters"]["pipeline"]["analysis_shed"]
     assert shed > 0 and summary["counters"]["pipeline"]["frames_analysed"] + shed == n_wanted + n_other_topics
+
+
+def test_a_full_queue_keeps_the_test_point_evidence_in_order_and_counts_what_it_sheds():
+    """Room for 4 of 10 frames: the two STATUSTEXTs are kept whatever the room, the data frames up
+    to what is left of it (the earliest ones), all in the order they came; the other 6 counted."""
+    from livesweep.monitor.ingest import FrameQueue
+    from livesweep.telemetry.frames import Frame
+
+    q = FrameQueue(4, shed=True)
+    topics = ["/mavlink/ATTITUDE"] * 3 + ["/mavlink/STATUSTEXT"] + ["/mavlink/ATTITUDE"] * 5 + ["/mavlink/STATUSTEXT"]
+    frames = [Frame(t, k, None, {"k": k}) for k, t in enumerate(topics)]
+    q.put(frames, keep=lambda topic: topic == "/mavlink/STATUSTEXT")
+    got = q.get(0.0)
+    assert [f.receive_ns for f in got] == [0, 1, 3, 9] and q.shed == 6

@@ -179,9 +179,13 @@ def cmd_demo(args) -> int:
     source, recorder = capture.source, capture.recorder
     from livesweep.monitor.foxglove import write_layout
 
-    layout = write_layout(log, settings.signals, settings.inputs, settings.outputs)
-    view = RerunView(list(settings.inputs), list(settings.outputs), recording_id="demo",
-                     save_path=None if args.view else rrd, spawn=args.view)
+    try:
+        layout = write_layout(log, settings.signals, settings.inputs, settings.outputs)
+        view = RerunView(list(settings.inputs), list(settings.outputs), recording_id="demo",
+                         save_path=None if args.view else rrd, spawn=args.view)
+    except BaseException:
+        capture.close()
+        raise
     print(f"  simulator -> MAVLink 2 over udp 127.0.0.1:{port} at {args.speed:g}x real time -> monitor")
     sim = subprocess.Popen([sys.executable, "-m", "livesweep", "sim", "--axis", "da", "--repeat", "2",
                             "--omega-min", "0.3", "--omega-max", "20", "--duration", "100", "--amplitude", "3",
@@ -513,7 +517,7 @@ def cmd_monitor(args) -> int:
                 part.close()
         raise
     if args.markers or (args.markers is None and sys.stdin.isatty()):
-        from livesweep.monitor.markers import HELP, MarkerSource
+        from livesweep.monitor.markers import MarkerSource
 
         sources.append(MarkerSource())
     status = None

@@ -54,11 +54,16 @@ class FrameQueue:
             if self.shedding:
                 room = self.limit - self._n
                 if room < len(frames):
-                    kept = [f for f in frames if keep is not None and keep(f.topic)]
-                    others = [f for f in frames if keep is None or not keep(f.topic)]
-                    room = max(room - len(kept), 0)
-                    self.shed += max(len(others) - room, 0)
-                    frames = kept + others[:room] if kept else others[:room]
+                    # in order: every frame ``keep`` names, and the others while room is left for them
+                    must = [keep is not None and keep(f.topic) for f in frames]
+                    room = max(room - sum(must), 0)
+                    out = []
+                    for f, m in zip(frames, must):
+                        if m or room > 0:
+                            out.append(f)
+                            room -= not m
+                    self.shed += len(frames) - len(out)
+                    frames = out
                     if not frames:
                         return
             else:

@@ -45,16 +45,17 @@ import socket
 import struct
 import subprocess
 import sys
+import threading
 import time
 from collections import deque
 from pathlib import Path
-from typing import Any
 
 from livesweep.errors import ConfigError, LivesweepError, LogFormatError
+from livesweep.telemetry.mavlink_in import KERNEL_DROPS_KNOWN, SO_RXQ_OVFL
 from livesweep.telemetry.recorder import RAW_TOPIC
 
 __all__ = ["LiveCapture", "CaptureSource", "CaptureRecorder", "RAW_TOPIC", "RCVBUF_BYTES", "EVENT_MESSAGES",
-           "frame_msgids"]
+           "frame_heads"]
 
 log = logging.getLogger(__name__)
 
@@ -68,21 +69,13 @@ _RAW_SCHEMA = {"type": "object", "description": "A MAVLink datagram exactly as r
                "properties": {"src": {"type": "integer", "description": "index into the channel's sources"},
                               "b64": {"type": "string", "contentEncoding": "base64"}},
                "required": ["src", "b64"]}
-_SO_RXQ_OVFL = 40
 _SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)
 _STATUS_EVERY_S = 0.25        # counters to the monitor this often [s]
-_FLUSH_EVERY_S = 1.0          # chunks to the OS this often: the most a kill loses [s]
+_DROPS_EVERY_S = 1.0          # the kernel's drop count read from /proc this often [s]
 _DRAIN_S = 5.0                # at the end, read the sockets until empty for at most this long [s]
 _BATCH_BYTES = 48 * 1024      # datagrams forwarded per packet to the monitor, at most
 _PENDING_EVENTS = 100_000     # event datagrams waiting for the monitor, at most (then they are shed too)
 _READY_S = 20.0               # the recorder process must be ready within this [s]
-
-
-def frame_msgids(data: bytes) -> list[int] | None:
-    """The message ids of the MAVLink frames in a datagram, from their headers alone (no CRC, no
-    decoding); None when the bytes do not frame as MAVLink (the decoder then judges them)."""
-    heads = frame_heads(data)
-    return None if heads is None else [i for i, _ in heads]
 
 
 def frame_heads(data: bytes) -> list[tuple[int, int]] | None:
@@ -110,16 +103,15 @@ def open_udp(host: str, port: int, rcvbuf_bytes: int = RCVBUF_BYTES) -> tuple[so
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
     sock = socket.socket(family, socket.SOCK_DGRAM)
     try:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         for opt in (_SO_RCVBUFFORCE, socket.SO_RCVBUF):
             try:
                 sock.setsockopt(socket.SOL_SOCKET, opt, rcvbuf_bytes)
                 break
             except OSError:
                 continue
-        if sys.platform.startswith("linux"):
+        if KERNEL_DROPS_KNOWN:
             try:
-                sock.setsockopt(socket.SOL_SOCKET, _SO_RXQ_OVFL, 1)
+                sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
             except OSError:  # pragma: no cover - an old kernel: drops stay unknown
                 pass
         sock.bind((host, port))
@@ -189,8 +181,16 @@ class CaptureRecorder:
     def __init__(self, capture: "LiveCapture"):
         self._cap = capture
         self.path = capture.record_path
-        self.bad_publish_time = 0
-        self.unrecordable = 0
+
+    @property
+    def bad_publish_time(self) -> int:
+        """Frames recorded with their receive time for a vehicle stamp MCAP cannot hold."""
+        return int(self._cap.counts.get("bad_publish_time", 0))
+
+    @property
+    def unrecordable(self) -> int:
+        """Frames the recorder could not write (counted, said as a link alert)."""
+        return int(self._cap.counts.get("unrecordable", 0))
 
     def record(self, frames) -> None:
         """Frames of the monitor's other sources (Zenoh, markers, its own events)."""
@@ -251,16 +251,14 @@ class LiveCapture:
         self.record_path = None if record_path is None else Path(record_path)
         if self.record_path is not None and self.record_path.exists() and not overwrite:
             raise LogFormatError(f"MCAP log {self.record_path} exists: it is not overwritten unless asked (--force)")
-        self._socks, self.urls, self.rcvbuf_granted = [], [], []
-        self._key = signing_key
+        self._socks, self.urls = [], []
         try:
             for url in urls:
                 t = parse_source_url(url)
                 if t["kind"] != "udpin":
                     raise ConfigError(f"MAVLink input {url!r}: the recorder process reads udpin links only")
-                sock, granted = open_udp(t["host"], t["port"], rcvbuf_bytes)
+                sock, _granted = open_udp(t["host"], t["port"], rcvbuf_bytes)
                 self._socks.append(sock)
-                self.rcvbuf_granted.append(granted)
                 host, port = sock.getsockname()[:2]
                 self.urls.append(f"udpin:{host}:{port}")
             self._frames_rx, frames_tx = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
@@ -300,7 +298,7 @@ class LiveCapture:
         self.summary: dict = {}
         self.ended = False
         self._closed = False
-        self._pending: deque = deque()
+        self._send_lock = threading.Lock()       # the ingest thread and the main thread both send
         self.source = CaptureSource(self)
         self.recorder = CaptureRecorder(self)
 
@@ -310,7 +308,10 @@ class LiveCapture:
         while time.monotonic() < deadline:
             r, _, _ = select.select([self._frames_rx], [], [], 0.1)
             if r:
-                msg = pickle.loads(self._frames_rx.recv(1 << 20))
+                raw = self._frames_rx.recv(1 << 20)
+                if not raw:
+                    raise LivesweepError(f"the recorder process ended at start (exit code {self._proc.wait()})")
+                msg = pickle.loads(raw)
                 if msg[0] == "ready":
                     return
                 if msg[0] == "error":
@@ -333,7 +334,8 @@ class LiveCapture:
             return
         data = pickle.dumps(msg, protocol=pickle.HIGHEST_PROTOCOL)
         try:
-            self._ctl.sendall(struct.pack("<I", len(data)) + data)
+            with self._send_lock:
+                self._ctl.sendall(struct.pack("<I", len(data)) + data)
         except OSError as e:
             raise LivesweepError(f"the recorder process is gone ({e.strerror or e}); "
                                  f"exit code {self._proc.poll()}") from None
@@ -358,7 +360,8 @@ class LiveCapture:
         self._closed = True
         try:
             data = pickle.dumps(("close",), protocol=pickle.HIGHEST_PROTOCOL)
-            self._ctl.sendall(struct.pack("<I", len(data)) + data)
+            with self._send_lock:
+                self._ctl.sendall(struct.pack("<I", len(data)) + data)
         except OSError:
             pass
         self._frames_rx.setblocking(True)
@@ -473,7 +476,8 @@ class _Recorder:
         self.monitor_gone = False
         self.ctl_eof = False
         self.counters: dict | None = None      # the monitor's counters, for the file's metadata
-        self.last_status = self.last_flush = time.monotonic()
+        self.last_status = self.last_drops = time.monotonic()
+        self.rcvbuf_bytes = [s.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF) for s in self.socks]
         self.frames: list = []                 # decoded frames waiting for JSON (reused list)
 
     # -- reading ----------------------------------------------------------------------------------
@@ -494,10 +498,10 @@ class _Recorder:
             except OSError as e:
                 if e.errno == errno.ECONNREFUSED:
                     continue
-                raise
+                raise LivesweepError(f"MAVLink input {self.urls[k]}: {e.strerror or e}") from None
             rx = self.receive_ns()
             for level, kind, payload in anc:
-                if kind == _SO_RXQ_OVFL and len(payload) >= 4:
+                if kind == SO_RXQ_OVFL and len(payload) >= 4:
                     drops = struct.unpack("I", payload[:4])[0]
             if write is not None:
                 write(RAW_TOPIC, prefix + b64(data) + b'"}', rx)
@@ -547,14 +551,19 @@ class _Recorder:
         (counted); an event packet waits for room (bounded) after those already waiting."""
         if self.monitor_gone:
             return False
-        if event or self.events:
-            if event:
-                if len(self.events) >= _PENDING_EVENTS:
-                    self.shed += 1
-                    return False
-                self.events.append(pickle.dumps(msg, protocol=pickle.HIGHEST_PROTOCOL))
-                self.send_events()
-                return True
+        if event:
+            if len(self.events) >= _PENDING_EVENTS:
+                self.shed += 1
+                return False
+            self.events.append(pickle.dumps(msg, protocol=pickle.HIGHEST_PROTOCOL))
+            self.send_events()
+            return True
+        if self.events:                  # nothing overtakes the evidence still waiting
+            self.send_events()
+            if self.events:
+                if msg[0] == "data":
+                    self.shed += len(msg[1])
+                return False
         data = pickle.dumps(msg, protocol=pickle.HIGHEST_PROTOCOL)
         try:
             self.out.send(data)
@@ -671,19 +680,22 @@ class _Recorder:
         counts["bytes"] = sum(self.bytes)
         counts["analysis_shed"] = self.shed
         counts["decode_backlog"] = len(self.backlog)
-        counts["rcvbuf_bytes"] = [s.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF) for s in self.socks]
+        counts["rcvbuf_bytes"] = self.rcvbuf_bytes
+        if self.rec is not None:
+            counts["unrecordable"] = self.rec.unrecordable
+            counts["bad_publish_time"] = self.rec.bad_publish_time
         return {"counts": counts, "last_rx": dict(self.last_rx)}
 
     def periodic(self, now: float) -> None:
         if now - self.last_status >= _STATUS_EVERY_S:
             self.last_status = now
-            if int(now) != int(self.last_status - _STATUS_EVERY_S):   # about once a second
+            if now - self.last_drops >= _DROPS_EVERY_S:
+                self.last_drops = now
                 self.refresh_drops()
             self.flush_forward()
             self.send_out(("status", self.status()))
-        if self.rec is not None and now - self.last_flush >= _FLUSH_EVERY_S:
-            self.last_flush = now
-            self.rec.maybe_flush()
+        if self.rec is not None:
+            self.rec.maybe_flush()          # every flush_interval_s (1 s): the most a kill loses
 
     # -- the loop -----------------------------------------------------------------------------------
     def run(self) -> None:
@@ -754,16 +766,25 @@ def _main() -> int:
     try:
         rec = _Recorder(cfg)
     except (LivesweepError, OSError) as e:
-        out.send(pickle.dumps(("error", str(e))))
+        why = str(e) if isinstance(e, LivesweepError) else \
+            f"{cfg.get('record') or 'the recorder'}: cannot be written: {e.strerror or e}"
+        out.send(pickle.dumps(("error", why)))
         return 1
     signal.signal(signal.SIGTERM, lambda *a: setattr(rec, "closing", True))
     out.send(pickle.dumps(("ready",)))
     try:
         rec.run()
-    except LivesweepError as e:               # a full disk: one line to the monitor, the file kept
+    except (LivesweepError, OSError) as e:    # a full disk, a socket error: one line to the monitor
+        why = str(e) if isinstance(e, LivesweepError) else \
+            f"{cfg.get('record') or 'the recorder'}: {e.strerror or e} (recording stopped)"
+        if rec.rec is not None:
+            try:                              # what is written stays readable (livesweep recover)
+                rec.rec.close()
+            except (LivesweepError, OSError):
+                pass
         try:
             rec.out.setblocking(True)
-            rec.out.send(pickle.dumps(("error", str(e))))
+            rec.out.send(pickle.dumps(("error", why)))
         except OSError:
             pass
         return 1

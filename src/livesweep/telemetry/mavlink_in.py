@@ -118,9 +118,10 @@ _PROBE_BYTES = 64 * 1024
 _SIGNING_EPOCH_S = 1_420_070_400
 # a new signing stream may be this much older than the newest time stamp seen (1 min in 10 µs units)
 _SIGNING_NEW_STREAM_UNITS = 6_000_000
-# Linux: the socket option that reports the kernel's drop count with every datagram
-_SO_RXQ_OVFL = 40
-_KERNEL_DROPS = sys.platform.startswith("linux")
+#: Linux: the socket option that reports the kernel's drop count with every datagram.
+SO_RXQ_OVFL = 40
+#: Whether the kernel says how many datagrams it dropped (Linux).
+KERNEL_DROPS_KNOWN = sys.platform.startswith("linux")
 # tcpin: the most clients served at once (more are refused and counted)
 _MAX_TCP_CLIENTS = 16
 
@@ -365,7 +366,7 @@ def udp_kernel_drops(sock: socket.socket) -> int | None:
     """The datagrams the kernel dropped for a full receive buffer of ``sock``, from ``/proc/net/udp``
     (Linux; None elsewhere or when it cannot be read). The count the kernel stamps on each datagram
     (``SO_RXQ_OVFL``) only arrives with the next one: this also counts drops at the end of a burst."""
-    if not _KERNEL_DROPS:
+    if not KERNEL_DROPS_KNOWN:
         return None
     try:
         inode = str(os.fstat(sock.fileno()).st_ino)
@@ -510,9 +511,9 @@ class MavlinkSource:
                 self.rcvbuf_granted = self._tune(sock, rcvbuf_bytes)
         if kind == "tcpin":
             conn.listen.listen(_MAX_TCP_CLIENTS)   # pymavlink's backlog of 1 would stall a third client
-        if kind == "udpin" and _KERNEL_DROPS:
+        if kind == "udpin" and KERNEL_DROPS_KNOWN:
             try:
-                conn.port.setsockopt(socket.SOL_SOCKET, _SO_RXQ_OVFL, 1)
+                conn.port.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
             except OSError:  # pragma: no cover - an old kernel: drops stay unknown
                 pass
         self._rcvbuf = rcvbuf_bytes
@@ -580,7 +581,7 @@ class MavlinkSource:
         drops at the end of a burst stay unseen until more data comes; the monitor calls this
         about once a second and before the socket is closed, so every drop is counted.
         """
-        if self._kind != "udpin" or not _KERNEL_DROPS:
+        if self._kind != "udpin" or not KERNEL_DROPS_KNOWN:
             return
         drops = udp_kernel_drops(self._conn.port)
         if drops is not None:
@@ -589,10 +590,10 @@ class MavlinkSource:
     def _recv_udp(self) -> tuple[bytes, Any] | None:
         sock = self._conn.port
         try:
-            if _KERNEL_DROPS:
+            if KERNEL_DROPS_KNOWN:
                 data, anc, _flags, addr = sock.recvmsg(65535, 64)
                 for level, kind, payload in anc:
-                    if level == socket.SOL_SOCKET and kind == _SO_RXQ_OVFL and len(payload) >= 4:
+                    if level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL and len(payload) >= 4:
                         self._dec.counts["kernel_drops"] = struct.unpack("I", payload[:4])[0]
             else:  # pragma: no cover - not Linux
                 data, addr = sock.recvfrom(65535)

@@ -178,8 +178,11 @@ class _FastMessages:
 
     @classmethod
     def of(cls, writer: Writer, chunk_size: int) -> "_FastMessages | None":
-        from mcap._chunk_builder import ChunkBuilder
-        from mcap.records import MessageIndex
+        try:                              # mcap's internals: another version may have moved them
+            from mcap._chunk_builder import ChunkBuilder
+            from mcap.records import MessageIndex
+        except ImportError:
+            return None
 
         builder = getattr(writer, "_Writer__chunk_builder", None)
         stats = getattr(writer, "_Writer__statistics", None)
