@@ -110,3 +110,17 @@ def test_every_datagram_is_recorded_as_received_and_test_point_evidence_is_never
     assert raw == frames
     s = read_summary(out)
     assert s.complete and sum(v for k, v in s.message_counts.items() if k.startswith("/mavlink/")) == len(frames)
+
+
+def test_a_port_already_taken_is_refused_with_one_line(tmp_path):
+    """A second recorder on the same UDP port (a leftover monitor, a URL given twice) would take the
+    datagrams from the first: it is refused, naming the input."""
+    from livesweep.errors import LivesweepError
+
+    first = LiveCapture(["udpin:127.0.0.1:0"], record_path=tmp_path / "a.mcap")
+    try:
+        with pytest.raises(LivesweepError, match=r"^MAVLink input udpin:127\.0\.0\.1:\d+ cannot be opened"):
+            LiveCapture([first.urls[0]], record_path=tmp_path / "b.mcap")
+    finally:
+        first.close()
+    assert not (tmp_path / "b.mcap").exists()
