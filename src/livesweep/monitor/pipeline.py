@@ -725,7 +725,8 @@ class MonitorPipeline:
         # gaps counted as the estimator meets them, so a tick reports the same gaps whatever the block sizes
         # (a replay's blocks are longer than the live link's)
         gaps = self._invalid_fed
-        status = self.excitation.update(res, recent, gaps=gaps - self._seen_gaps, packets_lost=lost - self._seen_lost)
+        status = self.excitation.update(res, recent, gaps=gaps - self._seen_gaps, packets_lost=lost - self._seen_lost,
+                                        sweeping=self._sweep_in_window(t_s))
         self._seen_gaps, self._seen_lost = gaps, lost
         mag = 20 * np.log10(np.maximum(np.abs(frs.H), 1e-300))
         phase = np.rad2deg(np.unwrap(np.angle(frs.H), axis=-1))
@@ -763,23 +764,17 @@ class MonitorPipeline:
             if self.totals.estimates % max(1, self.s.results_every) == 0:
                 self.recorder.record_result("estimate", payload, log_time_ns=receive_ns())
 
-    def _said(self, t_s: float, alerts) -> list:
-        """The sliding window's alerts an operator should read now: not the expected effects of a
-        sweep (while a test point's data is in the window, the other inputs move with the swept one:
-        the controller's reaction, not a second input), each subject at most every
-        ``ALERT_INTERVAL_S`` of data time."""
+    def _sweep_in_window(self, t_s: float) -> bool:
+        """A test point's data is in the sliding window: while one runs, and until its data has left."""
         tracker = self.test_points
         last_end = max((tp["end_s"] for tp in tracker.closed[-1:]), default=None)
-        # a sweep in the window: while a test point runs and until its data has left the window
-        sweeping = tracker.current is not None or bool(tracker.closing) or \
+        return tracker.current is not None or bool(tracker.closing) or \
             (last_end is not None and t_s - last_end < self.s.window_s)
-        out = []
-        for a in alerts:
-            if sweeping and a.kind == "input_correlation":
-                continue
-            if (a := self._alert_gate.admit(t_s, a)) is not None:
-                out.append(a)
-        return out
+
+    def _said(self, t_s: float, alerts) -> list:
+        """The sliding window's alerts an operator should read now: each subject at most every
+        ``ALERT_INTERVAL_S`` of data time."""
+        return [a for a in (self._alert_gate.admit(t_s, a) for a in alerts) if a is not None]
 
     def _lag_s(self) -> float | None:
         """How far the analysis is behind the link [s]: now minus the receipt of the newest frame it

@@ -546,7 +546,7 @@ class ExcitationMonitor:
         return pairs, masks, coverage, tuple(alerts), power_masks
 
     def update(self, result: OnlineResult | None, recent_inputs: dict | None = None, *, gaps: int = 0,
-               packets_lost: int = 0) -> ExcitationStatus:
+               packets_lost: int = 0, sweeping: bool = False) -> ExcitationStatus:
         """Judge the current window.
 
         Parameters
@@ -560,6 +560,10 @@ class ExcitationMonitor:
             Data gaps found since the previous update (passed through as a ``data_gap`` alert).
         packets_lost : int
             Telemetry packets lost since the previous update (``packet_loss`` alert).
+        sweeping : bool
+            A single-axis sweep's data is in the window: the other inputs move with the swept one
+            (a controller's reaction, not a second exogenous input), so their correlation is
+            expected and no ``input_correlation`` alert is raised.
 
         Returns
         -------
@@ -629,7 +633,8 @@ class ExcitationMonitor:
             changed = False
         pairs, masks, coverage, corr_alerts, power_masks = self._cache
         enough = result.n_eff >= self.min_n_eff
-        alerts.extend(corr_alerts)
+        if not sweeping:
+            alerts.extend(corr_alerts)
 
         # coherence collapse on the required pairs
         t_now = float(result.t_end_s)
