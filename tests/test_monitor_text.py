@@ -56,6 +56,20 @@ def test_percent_never_crosses_its_threshold(fraction, threshold):
     assert (text == "0 %") == (fraction == 0.0)                          # none means none
 
 
+@settings(max_examples=2000, deadline=None)
+@given(st.floats(0.0, 1.0), st.floats(0.01, 0.99))
+def test_points_say_the_side_of_the_threshold_and_the_distance(fraction, threshold):
+    """The distance in percentage points has the sign of the side it is on, never "+0" or "-0"."""
+    from livesweep.numbers import points
+
+    text = points(fraction, threshold)
+    d = float(text.split()[0])
+    assert abs(d - 100 * (fraction - threshold)) <= 0.5 + 1e-9
+    if abs(fraction - threshold) >= 0.0005:           # a tenth of a point away: its side, signed
+        assert text.startswith("-" if fraction < threshold else "+"), text
+    assert text not in ("+0 points", "-0 points", "-0.0 points", "+0.0 points")
+
+
 def test_band_duration_cell():
     assert band_text((0.3, 18.93)) == "0.3 – 18.9"
     assert band_text(None) == band_text([]) == "—"

@@ -395,8 +395,6 @@ def _band_top_hz(stats: _Stats, m) -> tuple[float, str]:
 def _fit(stats: _Stats, name: str, m, whole: bool, rates: dict | None = None, live: bool = False) -> MapFit | None:
     """How map ``m`` fits: None when it holds no signal of the log; ``rates`` (signal -> Hz) replaces
     the measured rates (a stream's)."""
-    from livesweep.maps import vehicle_fits
-
     sp = m.spectral
     if sp is None:
         return None
@@ -416,14 +414,8 @@ def _fit(stats: _Stats, name: str, m, whole: bool, rates: dict | None = None, li
     n, total = len(ins) * len(outs), len(sp.inputs) * len(sp.outputs)
     if not n or (whole and n != total):
         return None
-    why = ""
-    vh = dict(stats.vehicle.parameters)
-    c, t = stats.vehicle.frame()
-    vh.update({k: v for k, v in (("FRAME_CLASS", c), ("FRAME_TYPE", t), ("MAV_TYPE", stats.vehicle.mav_type))
-               if v is not None})
-    if m.vehicle and not vehicle_fits(m.vehicle, vh):
-        why = stats.vehicle.contradiction(m.vehicle) or "another vehicle"
-    else:
+    why = stats.vehicle.contradiction(m.vehicle) or ""
+    if not why:
         top_hz, what = _band_top_hz(stats, m)
         need = RATE_PER_TOP_FREQUENCY * top_hz
         slow = sorted((have[s][1], s) for s in (*ins, *outs) if have[s][1] < need)

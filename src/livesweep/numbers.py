@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 __all__ = ["frozen_array", "finite_or_none", "NONFINITE_STRINGS", "nonfinite_text", "nonfinite_value",
-           "float_json_schema", "json_safe", "percent"]
+           "float_json_schema", "json_safe", "percent", "points"]
 
 #: How a non-finite float is written in a recorded JSON message, and read back.
 NONFINITE_STRINGS = {"NaN": math.nan, "Infinity": math.inf, "-Infinity": -math.inf}
@@ -135,3 +135,12 @@ def percent(fraction: float | None, threshold: float | None = None, *, missing: 
     if (tenths / 1000.0 < thr) != below:     # 1000 * f rounded onto an integer across the threshold
         tenths += -1 if below else 1
     return f"{tenths / 10.0:.1f} %"
+
+
+def points(fraction: float, threshold: float) -> str:
+    """How far a fraction is from its threshold in percentage points, signed: ``"+21 points"``,
+    with one decimal within half a point of it (``"-0.2 points"``), ``"0 points"`` on it."""
+    d = 100.0 * (float(fraction) - float(threshold))
+    if abs(d) < 0.05:
+        return "0 points"
+    return f"{d:+.0f} points" if abs(d) >= 0.5 else f"{d:+.1f} points"

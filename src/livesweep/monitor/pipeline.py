@@ -480,13 +480,13 @@ class MonitorPipeline:
         return ingest.received - ingest.received_recorded + own
 
     def _tell_sources(self) -> None:
-        """A recorder process forwards only what the analysis takes: the map's messages, the test-point
-        evidence, and once the aligner follows a vehicle, only that vehicle's data."""
+        """A recorder process forwards only what the analysis takes: the map's messages, and once the
+        aligner follows a vehicle, only that vehicle's data (the test-point evidence always:
+        :data:`~livesweep.telemetry.capture.EVENT_MESSAGES`)."""
         self._told_system = self.aligner.system
         for src in self.sources:
             if hasattr(src, "want"):
-                src.want(self._wanted | {"/mavlink/PARAM_VALUE", "/mavlink/STATUSTEXT", "/mavlink/HEARTBEAT",
-                                         "/mavlink/NAMED_VALUE_INT"}, self.aligner.system)
+                src.want(self._wanted, self.aligner.system)
 
     def _sources_shed(self) -> int:
         """Frames a recorder process could not hand to the analysis (recorded all the same)."""

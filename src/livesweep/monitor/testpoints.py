@@ -335,7 +335,6 @@ class TestPointTracker:
         self._sweep = _SweepDetector(self.inputs, self.fs) if "sweep" in self.sources else None
         self._systemid = SystemIdWatch()             # the analysed vehicle's SystemID runs
         self._ground_stations: set = {GCS_SYSID}     # systems whose HEARTBEAT says MAV_TYPE_GCS
-        self._last_end: float | None = None          # end of the last test point [s]
         self.ignored = 0                             # detected activity shorter than a test point
         #: the latest judgement of each recent test point, by its record's ``start_s`` (what a view draws)
         self.judgements: dict = {}
@@ -563,7 +562,6 @@ class TestPointTracker:
     def _close(self, tp: TestPoint) -> list[tuple[float, dict]]:
         self.closing.remove(tp)
         tp.trim(self.fs)
-        self._last_end = tp.end_s
         if tp.source == "sweep" and tp.duration_s(self.fs) < self.min_duration_s:
             self.ignored += 1                     # a doublet or a trim change, not a sweep
             return [(tp.end_s, {**tp.record("closed"), "state": "ignored"})]

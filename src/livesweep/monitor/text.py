@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from livesweep.numbers import percent
+from livesweep.numbers import percent, points
 from livesweep.spectral.adequacy import MIN_COHERENCE, REQUIRED_FRACTION
 
 __all__ = ["percent", "band_text", "duration_text", "time_text", "EPOCH_MIN_S", "md_cell", "md_table", "omega_text", "sweep_text",
@@ -262,7 +262,7 @@ def test_point_line(number: int, tp: dict) -> str:
         if _finite(frac):
             where = f" of {band_text(band)} rad/s" if band else ""
             parts.append(f"{p.get('output')}/{p.get('input')} {percent(frac, DEFAULT_REQUIRED_FRACTION)} adequate{where} "
-                         f"({100 * (float(frac) - DEFAULT_REQUIRED_FRACTION):+.0f} points)")
+                         f"({points(frac, DEFAULT_REQUIRED_FRACTION)})")
     line = head + ("; " + ", ".join(parts) if parts else "")
     if tp.get("verdict") != "GO" and tp.get("missing"):
         line += "; needs: " + "; ".join(str(m) for m in tp["missing"][:3])

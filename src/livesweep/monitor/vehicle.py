@@ -51,6 +51,10 @@ MULTIROTOR_TYPES = frozenset(FRAME_CLASS_MAV_TYPES.values())
 _FRAME_TEXT = re.compile(r"^Frame:\s*([A-Z0-9_]+)(?:/([A-Z0-9_]+))?")
 
 
+_CLASS_OF_NAME = {v: k for k, v in FRAME_CLASSES.items()}
+_TYPE_OF_NAME = {v: k for k, v in FRAME_TYPES.items()}
+
+
 def frame_of_text(text: str) -> tuple[str, str | None] | None:
     """ArduPilot's "Frame: QUAD/PLUS" text -> ``("QUAD", "PLUS")``; None for any other text."""
     m = _FRAME_TEXT.match(str(text).strip())
@@ -160,11 +164,23 @@ class VehicleInfo:
         c = None if c is None else int(round(c))
         t = None if t is None else int(round(t))
         if self.frame_text is not None:
-            names_c = {v: k for k, v in FRAME_CLASSES.items()}
-            names_t = {v: k for k, v in FRAME_TYPES.items()}
-            c = names_c.get(self.frame_text[0], c) if c is None else c
-            t = names_t.get(self.frame_text[1], t) if t is None and self.frame_text[1] else t
+            c = _CLASS_OF_NAME.get(self.frame_text[0], c) if c is None else c
+            t = _TYPE_OF_NAME.get(self.frame_text[1], t) if t is None and self.frame_text[1] else t
         return c, t
+
+    def known(self, names) -> dict:
+        """What the vehicle has said of ``names`` (name -> value): its parameters, with
+        ``FRAME_CLASS`` and ``FRAME_TYPE`` also from its "Frame:" text and ``MAV_TYPE`` from its
+        HEARTBEAT; a name it has not said is left out."""
+        c, t = self.frame()
+        said = {"FRAME_CLASS": c, "FRAME_TYPE": t, "MAV_TYPE": self.mav_type}
+        out = {}
+        for n in names:
+            v = said.get(n)
+            v = self.parameters.get(n) if v is None else v
+            if v is not None:
+                out[n] = float(v)
+        return out
 
     def contradiction(self, expected: dict) -> str | None:
         """Why a map made for ``expected`` (parameter -> value or values; ``MAV_TYPE`` for the
@@ -173,10 +189,7 @@ class VehicleInfo:
 
         if not expected:
             return None
-        have = dict(self.parameters)
-        c, t = self.frame()
-        have.update({k: float(v) for k, v in (("FRAME_CLASS", c), ("FRAME_TYPE", t), ("MAV_TYPE", self.mav_type))
-                     if v is not None})
+        have = self.known(expected)
         if vehicle_fits(expected, have):
             return None
         wrong = []
@@ -186,5 +199,6 @@ class VehicleInfo:
                 shown = " or ".join(f"{float(a):g}" for a in allowed)
                 wrong.append(f"{name} {have[name]:g} (the map is for {shown})")
         copter = self.mav_type is None or self.mav_type in MULTIROTOR_TYPES
+        c, t = self.frame()
         said = f"the vehicle is {frame_name(c, t)}" if c is not None and copter else "the vehicle says"
         return f"{said}: {', '.join(wrong)}"

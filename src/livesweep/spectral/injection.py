@@ -34,13 +34,10 @@ import numpy as np
 
 from livesweep.errors import ConfigError
 
-__all__ = ["SweepInjection", "ardupilot_chirp", "ARDUPILOT_SYSTEMID_DELAY_S", "ARDUPILOT_SID_PARAMETERS"]
+__all__ = ["SweepInjection", "ardupilot_chirp", "ARDUPILOT_SYSTEMID_DELAY_S"]
 
 #: ArduCopter starts the chirp this long after "SystemID Starting" (``SYSTEM_ID_DELAY``) [s].
 ARDUPILOT_SYSTEMID_DELAY_S = 1.0
-#: The ArduCopter parameters that define the chirp (and the axis it sweeps).
-ARDUPILOT_SID_PARAMETERS = ("SID_AXIS", "SID_MAGNITUDE", "SID_F_START_HZ", "SID_F_STOP_HZ", "SID_T_FADE_IN",
-                            "SID_T_REC", "SID_T_FADE_OUT")
 
 
 @dataclass(frozen=True)

@@ -51,6 +51,7 @@ import numpy as np
 
 from livesweep.errors import ConfigError
 from livesweep.numbers import percent as _percent
+from livesweep.numbers import points as _pts
 from livesweep.spectral.adequacy import MAX_RANDOM_ERROR, MIN_COHERENCE, REQUIRED_FRACTION
 from livesweep.spectral.analysis import analyze
 from livesweep.spectral.excitation import half_period_frequencies
@@ -336,12 +337,6 @@ def _pair(analysis, ref, o: str, swept: str, lo: float, hi: float, kind: str) ->
     return PairJudgement(o, swept, frac, widest, bands, kind, med, (min(out[0], frac), max(out[1], frac)), r)
 
 
-def _points(frac: float, required: float) -> str:
-    """Distance from the threshold in percentage points, signed."""
-    d = 100.0 * (frac - required)
-    return f"{d:+.0f} points" if abs(d) >= 0.5 else f"{d:+.1f} points"
-
-
 def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_input: str, outputs, band_rad_s, *,
                      valid: np.ndarray | None = None, references: dict | None = None,
                      injection: SweepInjection | None = None, elapsed_s: float | None = None, final: bool = True,
@@ -450,7 +445,7 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
         tag = " (marginal)" if p.marginal(required_fraction) else ""
         reasons.append(f"{pair}: {_percent(p.adequate_fraction, required_fraction)} of {band_text} "
                        f"{'adequate' if ok else 'NOT adequate'}{tag} (need {_percent(required_fraction)}: "
-                       f"{_points(p.adequate_fraction, required_fraction)}; {100 * a:.0f}-{100 * b:.0f} % within the "
+                       f"{_pts(p.adequate_fraction, required_fraction)}; {100 * a:.0f}-{100 * b:.0f} % within the "
                        f"random error; {kind} coherence)")
         if not ok:
             missing += [_describe_gap(pair, ga, gb, lo, j_hi, resolvable, duration)
@@ -476,7 +471,7 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
             reached = f"{what} {swept[0]:.3g}-{swept[1]:.3g} rad/s" if swept is not None else f"{what} none of the band"
         word = "swept" if excited >= required_fraction else "NOT swept"
         reasons.append(f"{swept_input}: {_percent(excited, required_fraction)} of {band_text} {word} "
-                       f"(need {_percent(required_fraction)}: {_points(excited, required_fraction)}): {reached}")
+                       f"(need {_percent(required_fraction)}: {_pts(excited, required_fraction)}): {reached}")
         if final and excited < required_fraction:
             gaps = ", ".join(f"{a:.3g}-{b:.3g}" for a, b in _gaps(swept_bands, lo, j_hi))
             missing.append(f"{swept_input} needs a sweep over {gaps} rad/s: {reached}")

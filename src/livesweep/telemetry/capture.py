@@ -704,6 +704,8 @@ class _Recorder:
         while not self.closing:
             timeout = 0.0 if self.backlog else 0.05
             r, _, _ = select.select(waitables, [], [], timeout)
+            if self.ctl in r:            # the monitor's wishes first: what it wants applies to what is read now
+                self.control()
             got = 0
             for k, s in enumerate(socks):
                 if s in r:
@@ -712,8 +714,6 @@ class _Recorder:
                 self.flush_forward()
             if self.events:
                 self.send_events()
-            if self.ctl in r:
-                self.control()
             # decode between reads, a slice at a time, while no datagram waits
             while self.backlog and not self.closing:
                 self.decode(256)
