@@ -235,6 +235,7 @@ class _Stats:
         self._new_vehicle = VehicleInfo
         self.runs: list[dict] = []                   # SystemID runs: start ns, end ns, axis, injection
         self._watches: dict = {}                     # sysid -> SystemIdWatch
+        self._run_seconds: list | None = None
         self.t0: int | None = None
         self.t_end: int | None = None
         #: key -> [extractor, n, min, max, first ns, last ns, {second: samples in it}]
@@ -308,6 +309,13 @@ class _Stats:
         else:
             self.runs.append({"start": t_ns, "end": None, "axis": ev.axis, "injection": ev.injection})
 
+    def run_seconds(self) -> list[int]:
+        """The whole seconds [s of receive time] inside the SystemID runs that ended (computed once, after the pass)."""
+        if self._run_seconds is None:
+            self._run_seconds = [k for r in self.runs if r["end"] is not None
+                                 for k in range(r["start"] // 1_000_000_000 + 1, r["end"] // 1_000_000_000)]
+        return self._run_seconds
+
     def signal(self, spec):
         return self.signals[f"{spec.topic}|{spec.field}|{spec.where}|{spec.sysid}|{spec.compid}"]
 
@@ -369,9 +377,7 @@ def _signal_rate(stats: _Stats, s: list) -> float:
     the SystemID runs (what the verdict judges), else over the seconds it arrives in; a stream rate
     raised after connecting, or a gap, does not pull it down."""
     per_second = s[6]
-    secs = [k for r in stats.runs if r["end"] is not None
-            for k in range(r["start"] // 1_000_000_000 + 1, r["end"] // 1_000_000_000)]
-    counts = [per_second[k] for k in secs if k in per_second]
+    counts = [per_second[k] for k in stats.run_seconds() if k in per_second]
     if len(counts) < 3:
         counts = list(per_second.values())[1:-1]          # whole seconds only
     if len(counts) < 3:

@@ -7,8 +7,8 @@ signal, the link) has not been said within ``interval_s`` of data time; what it 
 counted and said with the next one of that subject ("(4 more in the last 10 s)"). Data time, not
 the wall clock, so a replay says what the live run said.
 
-What a chirp is expected to do is no alert at all (the monitor decides that before asking the gate:
-inputs that move together while one is swept are the controller's reaction).
+What a chirp is expected to do is no alert at all, and never reaches the gate: inputs that move
+together while one is swept are the controller's reaction (``ExcitationMonitor.update(sweeping=True)``).
 
 Pure: no I/O.
 """

@@ -208,6 +208,25 @@ def _crossing_times(t: np.ndarray, x: np.ndarray, h: float) -> np.ndarray:
     return 0.5 * (tz[a[ok]] + tz[b[ok]])
 
 
+def _centred_crossings(t_s, values, hysteresis: float) -> tuple | None:
+    """``(t, crossings, peak)``: the finite samples' times, the times they cross their midrange (of
+    the 0.5/99.5 % percentiles: a sweep oscillates about trim, and the midrange does not depend on
+    how many periods the buffer holds) with hysteresis ``hysteresis`` x the peak deviation, and that
+    peak; None with fewer than 8 samples or no deviation."""
+    t = np.asarray(t_s, float)
+    x = np.asarray(values, float)
+    ok = np.isfinite(x) & np.isfinite(t)
+    t, x = t[ok], x[ok]
+    if x.size < 8:
+        return None
+    lo, hi = np.percentile(x, [0.5, 99.5])
+    x0 = x - 0.5 * (lo + hi)
+    peak = float(np.max(np.abs(x0)))
+    if peak == 0.0:
+        return None
+    return t, _crossing_times(t, x0, hysteresis * peak), peak
+
+
 def half_period_frequencies(t_s, values, *, hysteresis: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
     """Instantaneous frequency of an oscillating signal, one value per half-period.
 
@@ -233,19 +252,11 @@ def half_period_frequencies(t_s, values, *, hysteresis: float = 0.3) -> tuple[np
     omega : ndarray
         Their frequencies [rad/s].
     """
-    t = np.asarray(t_s, float)
-    x = np.asarray(values, float)
-    ok = np.isfinite(x) & np.isfinite(t)
-    t, x = t[ok], x[ok]
     empty = (np.empty(0), np.empty(0))
-    if x.size < 8:
+    got = _centred_crossings(t_s, values, hysteresis)
+    if got is None:
         return empty
-    lo, hi = np.percentile(x, [0.5, 99.5])
-    x0 = x - 0.5 * (lo + hi)
-    peak = float(np.max(np.abs(x0)))
-    if peak == 0.0:
-        return empty
-    c = _crossing_times(t, x0, hysteresis * peak)
+    c = got[1]
     d = np.diff(c)
     keep = d > 0
     if not np.any(keep):
@@ -287,18 +298,10 @@ def track_sweep(t_s, values, *, hysteresis: float = 0.3, fit_s: float = 20.0, mi
         half-periods), or has too few crossings since its last pause (a half-period over three
         times the one before it ends a sweep; the crossings before it are not used).
     """
-    t = np.asarray(t_s, float)
-    x = np.asarray(values, float)
-    ok = np.isfinite(x) & np.isfinite(t)
-    t, x = t[ok], x[ok]
-    if x.size < 8:
+    got = _centred_crossings(t_s, values, hysteresis)
+    if got is None or got[2] <= quiet_amplitude:
         return None
-    lo, hi = np.percentile(x, [0.5, 99.5])
-    x0 = x - 0.5 * (lo + hi)
-    peak = float(np.max(np.abs(x0)))
-    if peak <= quiet_amplitude or peak == 0.0:
-        return None
-    c = _crossing_times(t, x0, hysteresis * peak)
+    t, c, _ = got
     if c.size < min_half_periods + 1:
         return None
     d = np.diff(c)
