@@ -86,6 +86,10 @@ def cmd_sim(args) -> int:
     if not (math.isfinite(args.speed) and args.speed > 0):
         raise ConfigError(f"--speed must be > 0 (1 = real time), got {args.speed!r}")
     out = _check_out_path(args.out) if args.out else None
+    if out is not None:
+        from livesweep.locks import check_file_free
+
+        check_file_free(out, overwrite=args.force)
     sender = None
     if args.mavlink:
         from livesweep.telemetry.mavlink_out import MavlinkSender
@@ -95,7 +99,7 @@ def cmd_sim(args) -> int:
     if out is not None:
         from livesweep.telemetry.sim_telemetry import write_sim_log
 
-        info = write_sim_log(result, out)
+        info = write_sim_log(result, out, overwrite=args.force)
         _print_log_summary(out)
         clipped = {k: v for k, v in info["stats"]["pwm_clipped"].items() if v}
         if clipped:
@@ -633,6 +637,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-turbulence", action="store_true", help="calm air")
     s.add_argument("--seed", type=int, default=0, help="random seed of noise and turbulence (same seed, same log)")
     s.add_argument("--out", help="MCAP file to write")
+    s.add_argument("--force", action="store_true", help="replace an existing --out (never a file being recorded)")
     s.add_argument("--mavlink", help="stream MAVLink 2 to a pymavlink URL, e.g. udpout:127.0.0.1:14550")
     s.add_argument("--speed", type=_positive_float, default=1.0, help="stream pace: 1 = real time, 10 = ten times faster")
     s.set_defaults(func=cmd_sim)

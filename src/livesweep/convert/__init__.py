@@ -27,6 +27,7 @@ from pathlib import Path
 
 from livesweep.convert.common import ConversionResult, sniff_format
 from livesweep.errors import LogFormatError
+from livesweep.locks import check_file_free
 
 __all__ = ["ConversionResult", "sniff_format", "convert", "check_output", "CONVERTERS"]
 
@@ -64,7 +65,8 @@ def check_output(out, inputs, *, force: bool = False) -> None:
     inputs : iterable of str or Path
         Files the conversion reads (the log, a column map).
     force : bool
-        Replace an existing ``out`` that is not an input.
+        Replace an existing ``out`` that is not an input (never one another process is writing,
+        such as a recording in progress).
 
     Raises
     ------
@@ -81,6 +83,7 @@ def check_output(out, inputs, *, force: bool = False) -> None:
         raise LogFormatError(f"--out {out} is a directory; give a file name ending in .mcap")
     if out.exists() and not force:
         raise LogFormatError(f"--out {out} exists; it is not overwritten unless asked (--force)")
+    check_file_free(out, overwrite=force, error=LogFormatError)
 
 
 def convert(src, out, *, force: bool = False, **options) -> ConversionResult:

@@ -71,6 +71,7 @@ from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import CompressionType, Writer
 
 from livesweep.errors import LogFormatError, quote
+from livesweep.locks import check_file_free, install_file
 from livesweep.numbers import NONFINITE_STRINGS, json_safe
 
 __all__ = [
@@ -242,7 +243,8 @@ class McapLogWriter:
         Chunk compression.
     atomic : bool
         If True, write ``<path>.partial`` and rename it onto ``path`` in :meth:`close` (an
-        existing ``path`` is replaced then). On an exception in the ``with`` block or on
+        existing ``path`` is replaced then, if ``overwrite``, but never one another process is
+        writing: :func:`livesweep.locks.install_file`). On an exception in the ``with`` block or on
         :meth:`abort`, the partial file is deleted and nothing is left behind. A stale
         ``<path>.partial`` from an earlier run is overwritten.
         If False, write ``path`` directly (live recording; see ``flush_every``).
@@ -308,6 +310,9 @@ class McapLogWriter:
         self._file_path = self._path.with_name(self._path.name + ".partial") if atomic else self._path
         if not overwrite and self._path.exists():
             raise LogFormatError(f"MCAP log {where} exists: it is not overwritten unless asked (--force)")
+        self._overwrite = bool(overwrite)
+        if atomic:
+            check_file_free(self._path, overwrite=overwrite, what="MCAP log", error=LogFormatError)
         self._file: BinaryIO | None = _open_locked(self._file_path, exclusive=not overwrite and not atomic,
                                                    where=where)
         self._writer = Writer(
@@ -618,7 +623,8 @@ class McapLogWriter:
             self._file.close()
             self._file = None
             if self._atomic:
-                os.replace(self._file_path, self._path)
+                install_file(self._file_path, self._path, overwrite=self._overwrite, what="MCAP log",
+                             error=LogFormatError)
         except OSError as e:
             self.abort()
             kept = "" if self._atomic else "; it is left unfinished: livesweep's readers and recover() read it"

@@ -288,7 +288,8 @@ def scenario_config(result: SimResult) -> dict:
 
 
 def write_sim_log(result: SimResult, path, *, aircraft: str | None = None, notes: str = "",
-                  sysid: int = 1, compid: int = 1, start_utc_ns: int = DEFAULT_START_UTC_NS) -> dict:
+                  sysid: int = 1, compid: int = 1, start_utc_ns: int = DEFAULT_START_UTC_NS,
+                  overwrite: bool = True) -> dict:
     """Write the simulated test point as an MCAP log (atomically: nothing is left on error).
 
     Parameters
@@ -298,6 +299,8 @@ def write_sim_log(result: SimResult, path, *, aircraft: str | None = None, notes
         ``.mcap`` file to create.
     aircraft, notes : str
         Test-point metadata; ``aircraft`` defaults to the model's (``"XV-15"`` for the XV-15 models).
+    overwrite : bool
+        Replace an existing ``path`` (never one another process is writing, such as a recording).
 
     Returns
     -------
@@ -308,7 +311,7 @@ def write_sim_log(result: SimResult, path, *, aircraft: str | None = None, notes
         aircraft = VEHICLE.get(result.scenario.model.name, (0, "XV-15"))[1]
     records, stats = mavlink_timeline(result, sysid=sysid, compid=compid, start_utc_ns=start_utc_ns)
     config = scenario_config(result)
-    with McapLogWriter(path, library=f"livesweep {__version__}") as w:
+    with McapLogWriter(path, library=f"livesweep {__version__}", overwrite=overwrite) as w:
         for name in sorted({r.msgname for r in records}):
             w.add_channel(f"/mavlink/{name}", f"mavlink.{name}", codec.json_schema(name))
         for r in records:
