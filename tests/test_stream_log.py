@@ -188,6 +188,12 @@ def test_tlog_streamed_into_the_monitor_records_what_the_tlog_holds(tmp_path):
     assert sent == ref_counts                                      # every frame went out
     assert re.search(r"^monitor: 23894 frames", m_out, re.MULTILINE), m_out   # and every one came in
     assert "kernel_drops" not in m_out
+    # every stamp the vehicle sent is taken as its time: SITL's clock stepping back is no implausible stamp
+    from livesweep.telemetry.mcap_log import read_summary
+    from livesweep.telemetry.recorder import COUNTERS_METADATA
+
+    counters = json.loads(read_summary(rec).metadata[COUNTERS_METADATA]["sources"])[0]
+    assert counters["clock_implausible"] == 0 and counters["clock_unrepresentable"] == 0
 
     conv = tmp_path / "conv.mcap"
     c = _livesweep("convert", str(VTOL), "--out", str(conv))

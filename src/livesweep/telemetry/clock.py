@@ -21,6 +21,18 @@ frame 116 days ahead would make the aligner fill 116 days of grid.
   recognised only for fields declared ``wrap_units`` wide, and only from the top of the range to
   its bottom.
 
+* :class:`StampCheck`: whether a stamp is one a vehicle's clock can have, for the recording (which
+  keeps every frame and only decides whether its stamp becomes the MCAP publish time). One check
+  per (system, component, message type): a field's meaning differs between messages (GPS_RAW_INT's
+  ``time_usec`` may be UNIX time where HIGHRES_IMU's is boot time, SERVO_OUTPUT_RAW's is a uint32
+  that wraps). A stamp is plausible when it is a UNIX (or GPS) time up to a day after the receive
+  clock, or when it steps back (a reboot, a wrap, a restarted simulator, reordering: the clock
+  may restart, so the stamp starts a new epoch of the stream), or when it steps forward from one
+  of the stream's recent epochs by no more than ``slack_s + max_rate * (receive step)``. Zero is
+  "no time yet" (GPS before a fix) and anchors nothing. What is left is a stamp ahead of every
+  clock the stream has shown: a value no clock of this vehicle has reached (a corrupt or forged
+  frame), unless ``confirm`` such stamps in a row agree (then they are a new epoch).
+
 Everything depends on the frames alone (stamp and receive time), never on the wall clock, so a
 replay of a recording makes the same decisions as the live run.
 """
@@ -30,7 +42,7 @@ from __future__ import annotations
 import math
 import time
 
-__all__ = ["ReceiveClock", "StampClock", "UINT64_NS_MAX", "receive_ns", "receive_offset_ns", "set_receive_offset_ns"]
+__all__ = ["ReceiveClock", "StampCheck", "StampClock", "UINT64_NS_MAX", "receive_ns", "receive_offset_ns", "set_receive_offset_ns"]
 
 #: The largest time an MCAP record can carry [ns].
 UINT64_NS_MAX = 2**64 - 1
@@ -240,3 +252,79 @@ class StampClock:
         t = s + self.offset_s
         self.last_t = max(self.last_t, t)
         return t, payload
+
+
+#: UNIX time of 2000-01-01 [ns]: a stamp from there to a day after the receive clock is a calendar time.
+_CALENDAR_FROM_NS = 946_684_800 * 10**9
+_DAY_NS = 86_400 * 10**9
+
+
+class StampCheck:
+    """Whether each stamp of one (system, component, message type) stream is one a vehicle's clock
+    can have (module notes).
+
+    Parameters
+    ----------
+    slack_s : float
+        Forward step allowed whatever the receive step [s].
+    max_rate : float
+        Vehicle seconds allowed per receive second beyond ``slack_s`` (fast replays).
+    max_reorder_s : float
+        A step back up to this continues the same epoch [s].
+    epochs : int
+        Recent epochs kept (the stream's clock before and after restarts).
+    confirm : int
+        Consecutive, mutually plausible stamps ahead of every epoch that start a new one.
+    wrap_ns : int, optional
+        The field's range [ns] when it is an unsigned integer that wraps (a uint32 ``time_usec``:
+        2**32 us): a step from the top of the range to its bottom continues the epoch.
+    """
+
+    def __init__(self, *, slack_s: float = 5.0, max_rate: float = 100.0, max_reorder_s: float = 1.0,
+                 epochs: int = 4, confirm: int = 3, wrap_ns: int | None = None):
+        self.wrap_ns = wrap_ns
+        self.slack_ns = slack_s * 1e9
+        self.max_rate = float(max_rate)
+        self.reorder_ns = max_reorder_s * 1e9
+        self.n_epochs = int(epochs)
+        self.confirm = int(confirm)
+        self._epochs: list[list] = []          # [last stamp ns (unwrapped), last receive ns, wraps ns], most recent first
+        self._ahead: list[tuple[int, int]] = []
+
+    def _fits(self, epoch, stamp_ns: int, rx_ns: int) -> bool:
+        step = stamp_ns - epoch[0]
+        return -self.reorder_ns <= step <= self.slack_ns + self.max_rate * max(rx_ns - epoch[1], 0)
+
+    def check(self, stamp_ns: int, rx_ns: int) -> bool:
+        """True when ``stamp_ns`` [ns] received at ``rx_ns`` [ns, UNIX] is plausible."""
+        if stamp_ns == 0:
+            return True
+        if _CALENDAR_FROM_NS <= stamp_ns <= rx_ns + _DAY_NS:
+            return True
+        epochs = self._epochs
+        for i, e in enumerate(epochs):            # e: [last stamp, last receive, offset of the wraps]
+            t = stamp_ns + e[2]
+            if self._fits(e, t, rx_ns) or (self.wrap_ns and self._fits(e, t + self.wrap_ns, rx_ns)
+                                           and e[0] - e[2] > self.wrap_ns // 2):
+                if not self._fits(e, t, rx_ns):   # from the top of the range to its bottom
+                    e[2] += self.wrap_ns
+                    t += self.wrap_ns
+                e[0], e[1] = max(e[0], t), rx_ns
+                if i:
+                    epochs.insert(0, epochs.pop(i))
+                self._ahead.clear()
+                return True
+        if not epochs or stamp_ns < max(e[0] - e[2] for e in epochs):   # the first, or a step back: a new epoch
+            epochs.insert(0, [stamp_ns, rx_ns, 0])
+            del epochs[self.n_epochs:]
+            self._ahead.clear()
+            return True
+        ahead = self._ahead
+        if ahead and not self._fits([ahead[-1][0], ahead[-1][1], 0], stamp_ns, rx_ns):
+            ahead.clear()
+        ahead.append((stamp_ns, rx_ns))
+        if len(ahead) >= self.confirm:          # they agree: the stream's clock moved on
+            epochs.insert(0, [stamp_ns, rx_ns, 0])
+            del epochs[self.n_epochs:]
+            ahead.clear()
+        return False

@@ -31,8 +31,9 @@ Nothing is dropped silently: every byte that does not become a frame is counted 
     seq_repeats            frames that repeat the previous ``seq`` of their source
     clock_unrepresentable  frames whose time stamp does not fit an MCAP time (uint64 ns): recorded
                            with their receive time as publish time
-    clock_implausible      frames whose time stamp does not follow their stream's recent clock
-                           (:class:`~livesweep.telemetry.clock.StampClock`): likewise
+    clock_implausible      frames whose time stamp is ahead of every clock their (system,
+                           component, message type) stream has shown
+                           (:class:`~livesweep.telemetry.clock.StampCheck`): likewise
     kernel_drops           datagrams the kernel dropped because the socket buffer was full (UDP
                            on Linux: ``SO_RXQ_OVFL`` on every datagram read, and
                            ``/proc/net/udp`` when :meth:`MavlinkSource.refresh_kernel_drops` is
@@ -54,7 +55,8 @@ Without a key, signatures are ignored and everything is accepted.
 
 Time: ``receive_ns`` comes from :func:`~livesweep.telemetry.clock.receive_ns` (UNIX time that
 does not step with the wall clock). A ``vehicle_ns`` outside what MCAP can hold, or that does not
-follow its (sysid, compid, time field) stream's recent clock, is replaced by None and counted
+no clock of its (sysid, compid, message type) stream can have
+(:class:`~livesweep.telemetry.clock.StampCheck`), is replaced by None and counted
 (``clock_unrepresentable``, ``clock_implausible``): the frame is still recorded, with its receive
 time as publish time, and its fields unchanged.
 
@@ -93,7 +95,7 @@ from typing import Any, Iterator
 
 from livesweep.errors import ConfigError, LivesweepError, LogFormatError
 from livesweep.telemetry import mavlink_codec as codec
-from livesweep.telemetry.clock import UINT64_NS_MAX, StampClock, receive_ns
+from livesweep.telemetry.clock import UINT64_NS_MAX, StampCheck, receive_ns
 from livesweep.telemetry.frames import Frame
 from livesweep.telemetry.mavlink_codec import _dialect, mavutil  # imported with MAVLINK20=1
 from livesweep.telemetry.mavlink_out import parse_url
@@ -173,7 +175,7 @@ class MavlinkDecoder:
         self._last_seq: dict[tuple[int, int], int] = {}
         self._allow_unsigned = bool(allow_unsigned)
         self._warned: set[str] = set()
-        self._stamp_clocks: dict[tuple[int, int, str], StampClock] = {}
+        self._stamp_clocks: dict[tuple[int, int, str], StampCheck] = {}
         self._time_specs: dict[str, tuple[str, int, int | None] | None] = {}   # msgname -> (field, ns/unit, wrap ns)
         # signing: newest time stamp per (link id, sysid, compid) and overall [10 µs since 2015].
         # Live: like mavutil.setup_signing, a *new* stream must not be more than one minute older
@@ -285,11 +287,11 @@ class MavlinkDecoder:
                             f"{raw} does not fit a log time in ns; recorded with its receive time (further ones are "
                             "only counted)")
             return None
-        key = (rec["sysid"], rec["compid"], field)
-        clock = self._stamp_clocks.get(key)
-        if clock is None:
-            clock = self._stamp_clocks[key] = StampClock(1e-9, wrap_units=wrap_ns)
-        if not clock.feed(vns, receive_ns * 1e-9) and not clock.jump_held:
+        key = (rec["sysid"], rec["compid"], mtype)       # one clock per stream: a field's meaning varies by message
+        check = self._stamp_clocks.get(key)
+        if check is None:
+            check = self._stamp_clocks[key] = StampCheck(wrap_ns=wrap_ns)
+        if not check.check(vns, receive_ns):
             self.counts["clock_implausible"] += 1
             self._warn_once("clock_implausible", f"MAVLink {mtype} from {rec['sysid']}/{rec['compid']}: {field} "
                             f"{raw} does not follow the stream's clock; recorded with its receive time (further ones "
