@@ -218,14 +218,30 @@ def test_clocks_of_one_vehicle_re_anchor_together_at_a_reboot():
     assert ok[-200:].all()
 
 
-def test_one_vehicle_is_analysed_even_when_topics_first_show_different_systems():
-    al = GridAligner({"a": spec("a", "/a"), "b": spec("b", "/b")}, ["a", "b"], 50.0)
+def test_a_strangers_frames_arriving_first_choose_nothing():
+    """A few frames of system 2 before system 1's stream: system 1 (the one sending every mapped
+    message for the settling time) is analysed from its first frame, exactly as if alone."""
     one, two = two_topics(0.0, 300, sysid=1), two_topics(0.0, 300, sysid=2)
-    frames = [f for f in two if f.topic == "/b"][:5] + sorted(one + two, key=lambda f: f.receive_ns)
-    for f in frames:
+    stranger = [f for f in two if f.topic == "/b"][:5]
+    alone = GridAligner({"a": spec("a", "/a"), "b": spec("b", "/b")}, ["a", "b"], 50.0)
+    mixed = GridAligner({"a": spec("a", "/a"), "b": spec("b", "/b")}, ["a", "b"], 50.0)
+    got = {}
+    for name, al, frames in (("alone", alone, one), ("mixed", mixed, stranger + one)):
+        for f in frames:
+            al.push(f)
+        al.settle_choice()
+        got[name] = np.hstack([b.values for b in iter(al.pop_ready, None)])
+    assert mixed.system == 1 and mixed.counts["other_system"] == 5 and mixed.counts["frames_used"] == 600
+    np.testing.assert_array_equal(got["mixed"], got["alone"])
+
+
+def test_a_named_system_is_analysed_whoever_comes_first():
+    one, two = two_topics(0.0, 300, sysid=1), two_topics(0.0, 300, sysid=2)
+    al = GridAligner({"a": spec("a", "/a"), "b": spec("b", "/b")}, ["a", "b"], 50.0, system=(2, None))
+    for f in sorted(one + two, key=lambda f: f.receive_ns):
         al.push(f)
-    assert al.system == 2                                       # the first system seen on any mapped topic
-    assert al.counts["other_system"] == 600 and al.counts["frames_used"] == 605
+    assert al.system == 2 and al.choice == "named"
+    assert al.counts["other_system"] == 600 and al.counts["frames_used"] == 600
 
 
 def test_dotted_fields_are_read_live_as_offline():

@@ -42,6 +42,7 @@ __all__ = [
     "TestPointSettings",
     "ChannelMap",
     "read_channel_map",
+    "channel_map_from_tables",
     "TEST_POINT_SOURCES",
     "SpectralSettings",
     "Case",
@@ -68,7 +69,7 @@ _SIGNAL_KEYS = ("topic", "field", "stamp", "stamp_topic", "stamp_scale", "scale"
                 "where")
 #: Top-level tables of a channel map (a case file's keys are accepted too: ``--case`` takes one).
 MAP_KEYS = ("map", "signals", "spectral", "test_points")
-_MAP_TABLE_KEYS = ("name", "description", "needs", "vehicle")
+_MAP_TABLE_KEYS = ("name", "description", "needs", "vehicle", "sysid", "compid")
 #: ``[map.vehicle]`` keys are parameter names (``FRAME_CLASS``) or ``MAV_TYPE`` (the HEARTBEAT type).
 _VEHICLE_KEY = re.compile(r"[A-Z][A-Z0-9_]{0,15}")
 _TEST_POINT_KEYS = ("sources", "axes", "required", "min_duration_s")
@@ -252,6 +253,10 @@ class ChannelMap:
         ``[map.vehicle]``: the vehicle this map is made for, as parameter values
         (``FRAME_CLASS``, ``FRAME_TYPE``) and ``MAV_TYPE`` (its HEARTBEAT type), each one or more
         allowed values; the monitor and ``inspect`` check them against what the vehicle says.
+    system : (int, int or None) or None
+        ``[map].sysid`` and ``[map].compid``: the MAVLink system (and component) the monitor
+        analyses; None: the first vehicle that sends every mapped signal
+        (:class:`~livesweep.telemetry.align.GridAligner`).
     """
 
     name: str
@@ -262,6 +267,7 @@ class ChannelMap:
     spectral: SpectralSettings | None
     test_points: TestPointSettings | None
     vehicle: dict = field(default_factory=dict)
+    system: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -625,7 +631,12 @@ def _parse_map_table(ctx: _Ctx, raw: Any) -> dict[str, Any]:
     t = _table(ctx, raw, "map")
     _check_keys(ctx, t, _MAP_TABLE_KEYS, "map")
     out: dict[str, Any] = {k: _string(ctx, t[k], f"map.{k}", nonempty=(k == "name"))
-                           for k in _MAP_TABLE_KEYS if k in t and k != "vehicle"}
+                           for k in ("name", "description", "needs") if k in t}
+    if "compid" in t and "sysid" not in t:
+        raise ctx.error("map.compid", "needs map.sysid (the component of which system)", t["compid"])
+    if "sysid" in t:
+        out["system"] = (_vehicle_id(ctx, t["sysid"], "map.sysid"),
+                         _vehicle_id(ctx, t["compid"], "map.compid") if "compid" in t else None)
     vehicle = {}
     for k, v in _table(ctx, t.get("vehicle", {}), "map.vehicle").items():
         key = f"map.vehicle.{quote(k)}"
@@ -828,4 +839,46 @@ def read_channel_map(path: str | os.PathLike[str], *, one_clock: bool = True) ->
     test_points = _parse_test_points(ctx, data["test_points"], spectral) if "test_points" in data else None
     return ChannelMap(name=head.get("name", ctx.path.stem), description=head.get("description", ""),
                       needs=head.get("needs", ""), path=ctx.path, signals=signals, spectral=spectral,
-                      test_points=test_points, vehicle=head.get("vehicle", {}))
+                      test_points=test_points, vehicle=head.get("vehicle", {}), system=head.get("system"))
+
+
+def channel_map_from_tables(tables: Mapping[str, Any], path: str | os.PathLike[str], *,
+                            where: str | None = None) -> ChannelMap:
+    """Validate channel-map tables that come from somewhere other than a TOML file (the monitor
+    settings stored in a recording) exactly as :func:`read_channel_map` validates a map file, with
+    every limit of :mod:`livesweep.limits` a map gets.
+
+    Parameters
+    ----------
+    tables : mapping
+        ``signals`` (required), ``spectral``, ``map``, ``test_points``, shaped as the TOML tables
+        of a channel map (docs/case-file.md).
+    path : str or os.PathLike
+        The file the tables came from (the result's ``path``; its stem is the default name).
+    where : str, optional
+        How messages name the tables' origin, e.g. ``"rec.mcap: livesweep_settings.json"``;
+        default ``path``.
+
+    Returns
+    -------
+    ChannelMap
+
+    Raises
+    ------
+    ConfigError
+        As :func:`read_channel_map` (mixed clocks allowed); the message names ``where``, the key
+        path and the value.
+    """
+    p = Path(path)
+    ctx = _Ctx(where if where is not None else p)
+    data = _table(ctx, tables, "settings")
+    _check_keys(ctx, data, MAP_KEYS, "")
+    if "signals" not in data:
+        raise ctx.error("signals", "missing: monitor settings need a signals table")
+    head = _parse_map_table(ctx, data["map"]) if "map" in data else {}
+    signals = _parse_signals(ctx, data["signals"])
+    spectral = _parse_spectral(ctx, data["spectral"], signals) if "spectral" in data else None
+    test_points = _parse_test_points(ctx, data["test_points"], spectral) if "test_points" in data else None
+    return ChannelMap(name=head.get("name", p.stem), description=head.get("description", ""),
+                      needs=head.get("needs", ""), path=p, signals=signals, spectral=spectral,
+                      test_points=test_points, vehicle=head.get("vehicle", {}), system=head.get("system"))

@@ -16,11 +16,13 @@
   stay aligned to the sample. uint32 MAVLink time fields are unwrapped (``wraps``); other fields
   never are. Each stream's first few stamps establish its clock (they are held, then released
   together), so a bad first stamp never becomes its reference.
-* **One vehicle.** MAVLink frames carry ``sysid`` and ``compid``: the aligner analyses the first
-  system it sees on any mapped topic, and on each topic the first component of that system; frames
-  of other systems and components are counted (``other_system``, ``other_component``) and left
-  out (the recording keeps them all), so one vehicle's inputs are never paired with another's
-  outputs. A signal that names its own ``sysid``/``compid`` takes the frames of that vehicle
+* **One vehicle, chosen once.** MAVLink frames carry ``sysid`` and ``compid``: the aligner
+  analyses one system, named (``system``) or chosen by
+  :class:`~livesweep.telemetry.vehicle_choice.VehicleChooser` (the first to send every mapped
+  message for a settling time; frames are held until then, so a stranger's frames arriving first
+  decide nothing), and on each topic one component of it; frames of other systems and components
+  are counted (``other_system``, ``other_component``) and left out (the recording keeps them
+  all), so one vehicle's inputs are never paired with another's outputs. A signal that names its own ``sysid``/``compid`` takes the frames of that vehicle
   instead (its stamps then have a clock of their own; ``other_system`` still counts the frames the
   lock leaves out for the other signals); a topic whose signals all do so does not move the lock.
 * **One extraction.** What a frame gives each signal (its selection by ``sysid``, ``compid`` and
@@ -63,6 +65,7 @@ from livesweep.errors import ConfigError
 from livesweep.telemetry.clock import StampClock
 from livesweep.telemetry.extract import SIGNAL_COUNT_KEYS, as_number, compile_signal, lookup  # as_number: re-exported
 from livesweep.telemetry.frames import Frame
+from livesweep.telemetry.vehicle_choice import VehicleChooser
 
 __all__ = ["AlignedBlock", "GridAligner", "as_number"]
 
@@ -139,11 +142,21 @@ class GridAligner:
         The longest stretch of grid emitted at once after a jump, and the longest a signal's
         samples wait for the others [s]: bounds memory whatever the stamps say. The monitor sets
         it to its sliding window, so everything older has left the window anyway.
+    system : (int, int or None), optional
+        The MAVLink system (and component; None: each topic's own) to analyse. None: chosen from
+        the frames (:mod:`livesweep.telemetry.vehicle_choice`).
+
+    Attributes
+    ----------
+    system : int or None
+        The system analysed, once named or chosen.
+    choice : str
+        Why that system ("named", or the chooser's reason); empty before the choice.
     """
 
     def __init__(self, signals: dict[str, SignalSpec], names, sample_rate_hz: float, *,
                  max_interp_gap_s: float = 0.1, gap_timeout_s: float = 2.0, reset_gap_s: float = 1.0,
-                 max_fill_s: float = 600.0):
+                 max_fill_s: float = 600.0, system: tuple | None = None):
         self.names = tuple(names)
         missing = [n for n in self.names if n not in signals]
         if missing:
@@ -189,8 +202,16 @@ class GridAligner:
         #: not_a_number, filtered by its sysid/compid/where, other_vehicle: left out by the lock).
         self.signal_counts = {n: dict.fromkeys(SIGNAL_COUNT_KEYS, 0) for n in self.names}
         self.clocks: dict[tuple[str, str], StampClock] = {}
-        self.system = None                           # the system id analysed (the first seen)
+        self.system = None                           # the system id analysed (named or chosen)
         self.components: dict[str, int] = {}          # topic -> the component id followed
+        self.choice = ""
+        self._chooser: VehicleChooser | None = None
+        if system is not None:
+            self.system, self.choice = int(system[0]), "named"
+            if system[1] is not None:
+                self.components = dict.fromkeys(self._locked_topics, int(system[1]))
+        elif self._locked_topics:
+            self._chooser = VehicleChooser(self._locked_topics)
         self._reanchors: dict = {}                    # vehicle -> (offset [s], first new stamp [s]) of its last reboot
         self.reset_gap_s = reset_gap_s
         self.ch = {n: _Channel() for n in self.names}
@@ -201,7 +222,7 @@ class GridAligner:
         self.counts = {"frames_used": 0, "samples": 0, "missing_field": 0, "not_a_number": 0, "late_dropped": 0,
                        "reordered": 0, "wraps": 0, "resets": 0, "clock_rejected": 0,
                        "other_system": 0, "other_component": 0, "samples_emitted": 0, "samples_invalid": 0, "samples_skipped": 0,
-                       "samples_expired": 0}
+                       "samples_expired": 0, "held_dropped": 0}
 
     # -- input ------------------------------------------------------------------------------
     def _clock(self, frame: Frame, stamp: str, scale: float, key: tuple | None = None,
@@ -298,9 +319,36 @@ class GridAligner:
         return got[0]
 
     def push(self, frame: Frame) -> None:
-        """Take the samples a frame carries (frames of other topics are ignored)."""
+        """Take the samples a frame carries (frames of other topics are ignored); while no vehicle
+        is chosen, frames are held and taken, in order, once one is."""
         if not isinstance(frame.data, dict):
             return
+        chooser = self._chooser
+        if chooser is None:
+            self._push(frame)
+            return
+        got = chooser.push(frame)
+        if got is not None:
+            self._take_choice(got)
+
+    def settle_choice(self) -> None:
+        """Choose now if no vehicle is chosen yet (the stream ended, or the monitor must say what it
+        has found): :meth:`VehicleChooser.decide_now`, and the held frames are taken."""
+        if self._chooser is not None:
+            self._take_choice(self._chooser.decide_now())
+
+    def _take_choice(self, got: tuple) -> None:
+        chooser = self._chooser
+        self._chooser = None
+        self.system, comps = got
+        self.components.update(comps)
+        self.choice = chooser.reason
+        self.counts["held_dropped"] += chooser.dropped
+        held, chooser.held = chooser.held, None
+        for f in held:
+            self._push(f)
+
+    def _push(self, frame: Frame) -> None:
         if frame.topic in self.stamp_topics:
             self._note_stamps(frame)
         names = self.by_topic.get(frame.topic)
