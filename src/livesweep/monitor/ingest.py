@@ -138,6 +138,7 @@ class Ingest(threading.Thread):
         self.last_rx: dict = {}
         self._topics: set[str] = set()  # topics read so far (the first frame of each goes to the analysis)
         self.drained = 0           # of which read while draining at stop
+        self.not_taken_at_stop = 0  # frames a source still held when the drain's time was up (not recorded)
         self.error: BaseException | None = None
         self._stop_event = threading.Event()
         self._drain = False
@@ -209,13 +210,23 @@ class Ingest(threading.Thread):
             self.queue.close()
 
     def _drain_live(self) -> None:
+        """What live sources hold at the stop, read and recorded (bounded by ``drain_timeout_s``). A
+        recorder process is asked to drain first and says when it has (its counts are final up to
+        there); what is still waiting at the deadline is counted (``not_taken_at_stop``)."""
         deadline = time.monotonic() + self.drain_timeout_s
         for src in self.sources:
             if not getattr(src, "live", False):
                 continue
+            ask = getattr(src, "request_drain", None)
+            if ask is not None:
+                ask()
             while time.monotonic() < deadline:
-                frames = src.poll(timeout_s=0)
-                if not frames:
+                frames = src.poll(timeout_s=0.05 if ask is not None else 0)
+                if frames:
+                    self.drained += len(frames)
+                    self._take(frames, getattr(src, "recorded", False))
+                elif ask is None or src.drained:
                     break
-                self.drained += len(frames)
-                self._take(frames, getattr(src, "recorded", False))
+            waiting = getattr(src, "waiting", None)
+            if waiting is not None:
+                self.not_taken_at_stop += int(waiting)

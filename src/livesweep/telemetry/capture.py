@@ -55,13 +55,19 @@ from livesweep.telemetry.mavlink_in import KERNEL_DROPS_KNOWN, SO_RXQ_OVFL
 from livesweep.telemetry.recorder import RAW_TOPIC
 
 __all__ = ["LiveCapture", "CaptureSource", "CaptureRecorder", "RAW_TOPIC", "RCVBUF_BYTES", "EVENT_MESSAGES",
-           "frame_heads"]
+           "KILL_LOSS_S", "buffer_for", "frame_heads"]
 
 log = logging.getLogger(__name__)
 
-#: Kernel receive buffer asked for per UDP socket [bytes]: about 4 s at 2 000 small datagrams/s
-#: (each costs about 1 kB of buffer, not its length).
+#: Kernel receive buffer asked for per UDP socket at start [bytes]: about 10 s at 2 000 small
+#: datagrams/s (each costs about 0.8-1.3 kB of buffer, not its length). Once the link's rate is
+#: known the buffer is sized to hold ``KILL_LOSS_S`` of it (see :func:`buffer_for`).
 RCVBUF_BYTES = 16 << 20
+#: What a kill of the recorder may lose of the stream that waits in the kernel's buffer [s]: the
+#: buffer is sized to this much of the measured rate (and the open chunk is flushed as often).
+KILL_LOSS_S = 1.0
+#: The smallest buffer [bytes]: a slow link keeps a few hundred datagrams of room.
+RCVBUF_MIN_BYTES = 256 << 10
 #: MAVLink messages that carry test-point evidence or what the vehicle says of itself: forwarded to
 #: the analysis even when it is behind (never shed).
 EVENT_MESSAGES = {0: "HEARTBEAT", 22: "PARAM_VALUE", 252: "NAMED_VALUE_INT", 253: "STATUSTEXT"}
@@ -94,6 +100,25 @@ def frame_heads(data: bytes) -> list[tuple[int, int]] | None:
             return None
         p += length
     return out
+
+
+def buffer_for(rate_hz: float, mean_bytes: float) -> int:
+    """The kernel buffer [bytes, as ``getsockopt(SO_RCVBUF)`` reports it] that holds ``KILL_LOSS_S``
+    of a stream of ``rate_hz`` datagrams/s of ``mean_bytes`` each: Linux charges a datagram about
+    ``max(832, length + 1000)`` bytes on loopback (measured), not its length."""
+    charge = max(832.0, mean_bytes + 1000.0)
+    return int(min(max(rate_hz * KILL_LOSS_S * charge, RCVBUF_MIN_BYTES), 2 * RCVBUF_BYTES))
+
+
+def _set_rcvbuf(sock: socket.socket, effective_bytes: int) -> int:
+    """Ask for a receive buffer of ``effective_bytes`` (Linux doubles what is asked); the one granted."""
+    for opt in (_SO_RCVBUFFORCE, socket.SO_RCVBUF):
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, opt, max(effective_bytes // 2, 1))
+            break
+        except OSError:
+            continue
+    return sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
 
 
 def open_udp(host: str, port: int, rcvbuf_bytes: int = RCVBUF_BYTES) -> tuple[socket.socket, int]:
@@ -147,6 +172,14 @@ class CaptureSource:
     @property
     def counts(self) -> dict:
         return self._cap.counts
+
+    def request_drain(self) -> None:
+        """At stop: the recorder reads, decodes and forwards what it holds, then says so (:attr:`drained`)."""
+        self._cap.request_drain()
+
+    @property
+    def drained(self) -> bool:
+        return self._cap.drained
 
     @property
     def finished(self) -> bool:
@@ -297,6 +330,7 @@ class LiveCapture:
         self.last_rx: dict = {}
         self.summary: dict = {}
         self.ended = False
+        self.drained = False
         self._closed = False
         self._send_lock = threading.Lock()       # the ingest thread and the main thread both send
         self.source = CaptureSource(self)
@@ -339,6 +373,12 @@ class LiveCapture:
         except OSError as e:
             raise LivesweepError(f"the recorder process is gone ({e.strerror or e}); "
                                  f"exit code {self._proc.poll()}") from None
+
+    def request_drain(self) -> None:
+        """Ask the recorder to read what the sockets hold now, decode it, forward what the analysis
+        wants and say ``drained`` (then :attr:`drained` is True, its counts final up to there)."""
+        self.drained = False
+        self.send(("drain",))
 
     def want(self, topics, system: int | None = None) -> None:
         from livesweep.telemetry.mavlink_codec import message_class
@@ -425,6 +465,10 @@ class LiveCapture:
                     self._decoders[k].datagram(data, rx, out)
             elif msg[0] == "status":
                 self._status(msg[1])
+            elif msg[0] == "drained":
+                self._status(msg[1])
+                self.drained = True
+                break
             elif msg[0] == "error":
                 raise LogFormatError(msg[1])
         return out
@@ -478,6 +522,9 @@ class _Recorder:
         self.counters: dict | None = None      # the monitor's counters, for the file's metadata
         self.last_status = self.last_drops = time.monotonic()
         self.rcvbuf_bytes = [s.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF) for s in self.socks]
+        self._sized_at = (time.monotonic(), [0] * len(self.socks), [0] * len(self.socks))
+        self.drain_asked = False
+        self.undecoded_at_stop = 0
         self.frames: list = []                 # decoded frames waiting for JSON (reused list)
 
     # -- reading ----------------------------------------------------------------------------------
@@ -653,6 +700,8 @@ class _Recorder:
             self.system = msg[2]
         elif kind == "close":
             self.closing = True
+        elif kind == "drain":
+            self.drain_asked = True
 
     # -- status -------------------------------------------------------------------------------------
     def refresh_drops(self) -> None:
@@ -680,11 +729,41 @@ class _Recorder:
         counts["bytes"] = sum(self.bytes)
         counts["analysis_shed"] = self.shed
         counts["decode_backlog"] = len(self.backlog)
+        counts["undecoded_at_stop"] = self.undecoded_at_stop
         counts["rcvbuf_bytes"] = self.rcvbuf_bytes
         if self.rec is not None:
             counts["unrecordable"] = self.rec.unrecordable
             counts["bad_publish_time"] = self.rec.bad_publish_time
         return {"counts": counts, "last_rx": dict(self.last_rx)}
+
+    def size_buffers(self, now: float) -> None:
+        """Each socket's kernel buffer to ``KILL_LOSS_S`` of its measured rate (:func:`buffer_for`):
+        what a kill loses of the stream waiting there stays within the promise; a stall longer than
+        that costs kernel drops, counted."""
+        t0, n0, b0 = self._sized_at
+        dt = now - t0
+        if dt < 1.0:
+            return
+        for k, sock in enumerate(self.socks):
+            n = self.datagrams[k] - n0[k]
+            if n <= 0:
+                continue
+            want = buffer_for(n / dt, (self.bytes[k] - b0[k]) / n)
+            if abs(want - self.rcvbuf_bytes[k]) > 0.25 * self.rcvbuf_bytes[k]:
+                self.rcvbuf_bytes[k] = _set_rcvbuf(sock, want)
+        self._sized_at = (now, list(self.datagrams), list(self.bytes))
+
+    def drain(self) -> None:
+        """What the monitor asked at its stop: read the sockets until empty, decode, forward, say
+        ``drained`` with the counts (bounded by ``_DRAIN_S``)."""
+        deadline = time.monotonic() + _DRAIN_S
+        while time.monotonic() < deadline and sum(self.read(k) for k in range(len(self.socks))):
+            pass
+        self.flush_forward()
+        while self.backlog and time.monotonic() < deadline:
+            self.decode(2_000)
+        self.refresh_drops()
+        self.send_out(("drained", self.status()), event=True)
 
     def periodic(self, now: float) -> None:
         if now - self.last_status >= _STATUS_EVERY_S:
@@ -692,6 +771,7 @@ class _Recorder:
             if now - self.last_drops >= _DROPS_EVERY_S:
                 self.last_drops = now
                 self.refresh_drops()
+                self.size_buffers(now)
             self.flush_forward()
             self.send_out(("status", self.status()))
         if self.rec is not None:
@@ -706,6 +786,9 @@ class _Recorder:
             r, _, _ = select.select(waitables, [], [], timeout)
             if self.ctl in r:            # the monitor's wishes first: what it wants applies to what is read now
                 self.control()
+                if self.drain_asked:
+                    self.drain_asked = False
+                    self.drain()
             got = 0
             for k, s in enumerate(socks):
                 if s in r:
@@ -729,8 +812,12 @@ class _Recorder:
             if not sum(self.read(k) for k in range(len(self.socks))):
                 break
         self.flush_forward()
-        while self.backlog:
-            self.decode(10_000)
+        while self.backlog and time.monotonic() < deadline + _DRAIN_S:
+            self.decode(2_000)
+        # beyond that the stop would wait on decoding: the rest is in the file as received
+        # (/link/mavlink), not decoded to /mavlink/*, and counted
+        self.undecoded_at_stop = len(self.backlog)
+        self.backlog.clear()
         self.control()            # the monitor's last results and counters
         self.refresh_drops()
         st = self.status()

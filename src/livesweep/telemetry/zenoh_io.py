@@ -402,6 +402,11 @@ class ZenohSource:
                 break
             self._decode(t_ns, key, payload, pend)
 
+    @property
+    def waiting(self) -> int:
+        """Samples received and not yet handed out (what a stop at this moment would not record)."""
+        return len(self._q) + len(self._pending)
+
     def poll(self, timeout_s: float = 0.05, max_frames: int = 10_000) -> list[Frame]:
         """Frames received since the last call (waits up to ``timeout_s`` only when there are none)."""
         if self._closed:
