@@ -124,3 +124,44 @@ def test_a_port_already_taken_is_refused_with_one_line(tmp_path):
     finally:
         first.close()
     assert not (tmp_path / "b.mcap").exists()
+
+
+def test_the_kernel_buffer_holds_about_a_second_of_the_measured_stream(tmp_path):
+    """A kill loses what waits in the kernel's buffer: once the rate is known the recorder sizes it to
+    ``KILL_LOSS_S`` of the stream, as the kernel charges datagrams (checked here by filling a socket
+    of that size with the same datagrams, without reading it)."""
+    from livesweep.telemetry.capture import KILL_LOSS_S, buffer_for
+
+    cap = LiveCapture(["udpin:127.0.0.1:0"], record_path=tmp_path / "a.mcap")
+    port = int(cap.urls[0].rsplit(":", 1)[1])
+    frames = _frames(400, 3)
+    rate = 2000.0
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            t0 = time.monotonic()
+            for i in range(int(rate * 3.5)):
+                s.sendto(frames[i % len(frames)], ("127.0.0.1", port))
+                if i % 100 == 99:
+                    time.sleep(max(0.0, t0 + (i + 1) / rate - time.monotonic()))
+                    cap.source.poll(timeout_s=0)
+        granted = cap.counts["rcvbuf_bytes"][0]          # while the stream runs (it follows the rate)
+    finally:
+        cap.close()
+    mean_len = float(np.mean([len(f) for f in frames]))
+    assert granted == pytest.approx(buffer_for(rate, mean_len), rel=0.3)
+    # that buffer, filled and never read, holds about KILL_LOSS_S of this stream
+    r = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    r.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, granted // 2)
+    r.bind(("127.0.0.1", 0))
+    with r, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        for i in range(int(rate * KILL_LOSS_S * 3)):
+            s.sendto(frames[i % len(frames)], r.getsockname())
+        r.setblocking(False)
+        held = 0
+        while True:
+            try:
+                r.recv(4096)
+            except BlockingIOError:
+                break
+            held += 1
+    assert held / rate == pytest.approx(KILL_LOSS_S, rel=0.35)
