@@ -21,7 +21,7 @@ from livesweep.config import SignalSpec
 from livesweep.telemetry.align import GridAligner
 from livesweep.telemetry.frames import Frame
 from livesweep.telemetry.mcap_log import read_messages
-from livesweep.telemetry.vehicle_choice import CHOOSE_WITHIN_S, VehicleChooser
+from livesweep.telemetry.vehicle_choice import CHOOSE_WITHIN_FRAMES, VehicleChooser
 from test_monitor_hardening import Vehicle, free_udp_port, mavlink_counts, sim_stream, start_monitor
 
 KEY = hashlib.sha256(b"livesweep vehicle choice key").digest()
@@ -135,8 +135,8 @@ def test_a_ground_station_is_never_chosen_and_a_heartbeat_orders_the_vehicles():
     topics = ("/mavlink/A", "/mavlink/B")
     ch = VehicleChooser(topics)
     gcs = [Frame("/mavlink/HEARTBEAT", 0, None, {"sysid": 255, "compid": 190, **GCS_HEARTBEAT})]
-    hb = [Frame("/mavlink/HEARTBEAT", int(0.5e9), None, {"sysid": 4, "compid": 1, **HEARTBEAT})]
-    frames = gcs + _frames(255, topics, 0.0, 100) + hb + _frames(7, topics, 0.1, 100) + _frames(4, topics, 0.6, 100)
+    hb = [Frame("/mavlink/HEARTBEAT", int(0.05e9), None, {"sysid": 4, "compid": 1, **HEARTBEAT})]
+    frames = gcs + _frames(255, topics, 0.0, 100) + hb + _frames(7, topics, 0.1, 100) + _frames(4, topics, 0.2, 100)
     frames.sort(key=lambda f: f.receive_ns)
     got = None
     for f in frames:
@@ -145,18 +145,18 @@ def test_a_ground_station_is_never_chosen_and_a_heartbeat_orders_the_vehicles():
             break
     # system 7 sent first and qualified first, but 4 said HEARTBEAT first: 4 is waited for and chosen
     assert got == (4, {"/mavlink/A": 1, "/mavlink/B": 1})
-    assert f.receive_ns * 1e-9 == pytest.approx(1.6, abs=0.03)
+    assert f.receive_ns * 1e-9 == pytest.approx(0.2 + 9 / 50, abs=0.001)      # its tenth frame of each
 
 
 def test_a_vehicle_that_never_sends_a_mapped_message_is_followed_after_the_wait():
     topics = ("/mavlink/A", "/mavlink/B")
     ch = VehicleChooser(topics)
     got = None
-    for f in _frames(3, topics[:1], 0.0, 400) + _frames(5, topics, 0.0, 2):
+    for f in _frames(3, topics[:1], 0.0, 2_100) + _frames(5, topics, 0.0, 2):
         got = got or ch.push(f)
     assert got == (3, {"/mavlink/A": 1})             # the most mapped types, then the most frames
     assert "sent the most" in ch.reason
-    assert len(ch.held) >= CHOOSE_WITHIN_S * 50
+    assert len(ch.held) >= CHOOSE_WITHIN_FRAMES
 
 
 def test_a_stream_without_system_ids_is_taken_at_once():

@@ -18,8 +18,8 @@
   together), so a bad first stamp never becomes its reference.
 * **One vehicle, chosen once.** MAVLink frames carry ``sysid`` and ``compid``: the aligner
   analyses one system, named (``system``) or chosen by
-  :class:`~livesweep.telemetry.vehicle_choice.VehicleChooser` (the first to send every mapped
-  message for a settling time; frames are held until then, so a stranger's frames arriving first
+  :class:`~livesweep.telemetry.vehicle_choice.VehicleChooser` (the first to send 10 frames of every
+  mapped message; frames are held until then, so a stranger's frames arriving first
   decide nothing), and on each topic one component of it; frames of other systems and components
   are counted (``other_system``, ``other_component``) and left out (the recording keeps them
   all), so one vehicle's inputs are never paired with another's outputs. A signal that names its own ``sysid``/``compid`` takes the frames of that vehicle

@@ -7,15 +7,16 @@ of it) and records the rest.
 
 The system is named (``livesweep monitor --sysid``, a map's ``[map].sysid``) or chosen: the first
 vehicle, in the order of their first HEARTBEAT (then of their first mapped frame, for a stream
-without HEARTBEATs), that sends **every** mapped message type at ``MIN_RATE_HZ`` or more, averaged
-from its first mapped frame, for ``SETTLE_S`` of receive time. A vehicle earlier in that order
-that has not qualified yet is waited for, up to ``CHOOSE_WITHIN_S`` after the first mapped frame.
-A ground station (a HEARTBEAT of type GCS) is never chosen. A frame or a few from another system,
+without HEARTBEATs), that has sent ``SETTLE_FRAMES`` frames of **every** mapped message type, at
+``MIN_RATE_HZ`` or more on average since its first mapped frame. A vehicle earlier in that order
+that has not qualified yet is waited for, for up to ``CHOOSE_WITHIN_FRAMES`` mapped frames. A
+ground station (a HEARTBEAT of type GCS) is never chosen. A frame or a few from another system,
 arriving first, decide nothing; until the choice the frames are held (in order, bounded), then the
 chosen vehicle's are analysed from its first one, so the analysis sees exactly what it would have
-seen with that vehicle alone on the link. When nobody qualifies within ``CHOOSE_WITHIN_S`` (a
-vehicle that never sends one of the mapped messages), the system with the most mapped frames is
-followed, so the analysis is never starved.
+seen with that vehicle alone on the link. Counting frames rather than seconds keeps the wait a
+fraction of a second of data at any replay speed. When nobody qualifies within
+``CHOOSE_WITHIN_FRAMES`` (a vehicle that never sends one of the mapped messages), the system with
+the most mapped frames is followed, so the analysis is never starved.
 
 Pure: no I/O; the times are the frames' receive times, so a replay chooses as the live run did.
 """
@@ -26,14 +27,15 @@ from collections import deque
 
 from livesweep.telemetry.frames import Frame
 
-__all__ = ["CHOOSE_WITHIN_S", "GCS_MAV_TYPE", "MAX_HELD_FRAMES", "MIN_RATE_HZ", "SETTLE_S", "VehicleChooser"]
+__all__ = ["CHOOSE_WITHIN_FRAMES", "GCS_MAV_TYPE", "MAX_HELD_FRAMES", "MIN_RATE_HZ", "SETTLE_FRAMES",
+           "VehicleChooser"]
 
-#: A candidate sends the mapped messages for this long [s of receive time] before it is chosen.
-SETTLE_S = 1.0
-#: ... each at this mean rate or more [Hz] (a few frames of a stranger never qualify).
+#: A candidate sends this many frames of every mapped message before it is chosen ...
+SETTLE_FRAMES = 10
+#: ... at this mean rate or more [Hz of receive time] (a few frames of a stranger never qualify).
 MIN_RATE_HZ = 5.0
-#: With no candidate qualified this long after the first mapped frame [s], the busiest is followed.
-CHOOSE_WITHIN_S = 5.0
+#: With no choice after this many mapped frames (all systems), the first qualified or the busiest is followed.
+CHOOSE_WITHIN_FRAMES = 2_000
 #: Frames held while undecided, at most (the oldest beyond are left out of the analysis, counted).
 MAX_HELD_FRAMES = 200_000
 #: MAVLink MAV_TYPE of a ground control station.
@@ -60,7 +62,7 @@ class VehicleChooser:
         self._gcs: set[int] = set()
         self._heartbeat: dict[int, float] = {}             # sysid -> first HEARTBEAT [s]
         self._qualified: set[int] = set()
-        self._t0: float | None = None
+        self._mapped = 0                                   # mapped frames seen (all systems)
         self.reason = ""
 
     def push(self, frame: Frame) -> tuple[int | None, dict[str, int]] | None:
@@ -87,8 +89,7 @@ class VehicleChooser:
             return None
         if frame.topic not in self.topics:
             return None
-        if self._t0 is None:
-            self._t0 = t
+        self._mapped += 1
         self._first.setdefault(sysid, t)
         counts = self._counts.setdefault(sysid, {})
         counts[frame.topic] = counts.get(frame.topic, 0) + 1
@@ -99,10 +100,10 @@ class VehicleChooser:
         if self._qualified:
             first = min((s for s in self._first if s not in self._gcs), key=self._order, default=None)
             if first in self._qualified:
-                self.reason = (f"the first vehicle to send every mapped message at {MIN_RATE_HZ:g} Hz or more "
-                               f"for {SETTLE_S:g} s")
+                self.reason = (f"the first vehicle to send {SETTLE_FRAMES} frames of every mapped message at "
+                               f"{MIN_RATE_HZ:g} Hz or more")
                 return self._chosen(first)
-        if t - self._t0 >= CHOOSE_WITHIN_S:
+        if self._mapped >= CHOOSE_WITHIN_FRAMES:
             return self.decide_now()
         return None
 
@@ -112,25 +113,26 @@ class VehicleChooser:
 
     def _qualifies(self, sysid: int, t: float) -> bool:
         counts = self._counts[sysid]
-        span = t - self._first[sysid]
-        return (sysid not in self._gcs and span >= SETTLE_S and len(counts) == len(self.topics)
-                and min(counts.values()) >= MIN_RATE_HZ * span)
+        if sysid in self._gcs or len(counts) < len(self.topics):
+            return False
+        least = min(counts.values())
+        return least >= SETTLE_FRAMES and least >= MIN_RATE_HZ * (t - self._first[sysid])
 
     def decide_now(self) -> tuple[int | None, dict[str, int]]:
-        """The choice when waiting longer is no use (``CHOOSE_WITHIN_S`` passed, the stream ended):
+        """The choice when waiting longer is no use (``CHOOSE_WITHIN_FRAMES`` passed, the stream ended):
         the system that sent the most mapped message types, then the most frames; ``(None, {})``
         when none sent any."""
         if self._qualified:
             first = min(self._qualified, key=self._order)
-            self.reason = (f"the first vehicle to send every mapped message at {MIN_RATE_HZ:g} Hz or more for "
-                           f"{SETTLE_S:g} s (an earlier one did not within {CHOOSE_WITHIN_S:g} s)")
+            self.reason = (f"the first vehicle to send {SETTLE_FRAMES} frames of every mapped message at "
+                           f"{MIN_RATE_HZ:g} Hz or more (an earlier one did not within {CHOOSE_WITHIN_FRAMES} frames)")
             return self._chosen(first)
         busiest = max((s for s in self._counts if s not in self._gcs),
                       key=lambda s: (len(self._counts[s]), sum(self._counts[s].values())), default=None)
         if busiest is None:
             self.reason = "no system sent a mapped message"
             return None, {}
-        self.reason = (f"no system sent every mapped message at {MIN_RATE_HZ:g} Hz for {SETTLE_S:g} s: "
+        self.reason = (f"no system sent {SETTLE_FRAMES} frames of every mapped message at {MIN_RATE_HZ:g} Hz: "
                        "the one that sent the most")
         return self._chosen(busiest)
 
