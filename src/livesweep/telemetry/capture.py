@@ -5,10 +5,11 @@ Rerun) may fall behind. The recording must not. :class:`LiveCapture` starts a *r
 (``python -m livesweep.telemetry.capture``) that owns the monitor's UDP sockets and its MCAP file:
 
 * **The bytes first.** A loop that does nothing else takes every datagram off its socket (a kernel
-  buffer sized for seconds of stream: :data:`RCVBUF_BYTES`, forced past ``net.core.rmem_max`` where
-  the process may) and writes it, as received, to the MCAP (``/link/mavlink``: the datagram in
+  buffer sized to ``KILL_LOSS_S`` of the measured stream, :data:`RCVBUF_BYTES` until the rate is
+  known, forced past ``net.core.rmem_max`` where the process may) and writes it, as received, to the MCAP (``/link/mavlink``: the datagram in
   base64 with its receive time) before any parsing: nothing the link delivered is lost to a slow
-  decoder, and a kill loses at most the last second.
+  decoder, and a kill loses at most what the buffer holds (``KILL_LOSS_S`` of the stream) and the
+  last second of the file.
 * **Then the decoded messages.** Between reads it decodes the datagrams into the usual
   ``/mavlink/<MSG>`` JSON channels (:class:`~livesweep.telemetry.mavlink_in.MavlinkDecoder`, the
   live source's own checks and counters: CRC, signing, sequence gaps, clock plausibility), so
@@ -64,10 +65,13 @@ log = logging.getLogger(__name__)
 #: known the buffer is sized to hold ``KILL_LOSS_S`` of it (see :func:`buffer_for`).
 RCVBUF_BYTES = 16 << 20
 #: What a kill of the recorder may lose of the stream that waits in the kernel's buffer [s]: the
-#: buffer is sized to this much of the measured rate (and the open chunk is flushed as often).
-KILL_LOSS_S = 1.0
-#: The smallest buffer [bytes]: a slow link keeps a few hundred datagrams of room.
-RCVBUF_MIN_BYTES = 256 << 10
+#: buffer is sized to this much of the measured rate. Long enough to ride out the stalls of a busy
+#: machine (a 2-core laptop with four monitors, five streams and a process on every core stalled
+#: the recorder for more than 1 s: a 1 s buffer dropped up to 1 060 datagrams a run where this one
+#: drops none), short enough that a kill (power loss) costs seconds, not minutes.
+KILL_LOSS_S = 5.0
+#: The smallest buffer [bytes]: a slow link keeps about a thousand datagrams of room.
+RCVBUF_MIN_BYTES = 1 << 20
 #: MAVLink messages that carry test-point evidence or what the vehicle says of itself: forwarded to
 #: the analysis even when it is behind (never shed).
 EVENT_MESSAGES = {0: "HEARTBEAT", 22: "PARAM_VALUE", 252: "NAMED_VALUE_INT", 253: "STATUSTEXT"}
