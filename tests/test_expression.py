@@ -172,3 +172,61 @@ def test_any_text_parses_or_fails_with_config_error(text):
         assert str(exc).startswith("M[1][1] = ")
         return
     assert isinstance(node, (Num, Name, Neg, BinOp))
+
+
+# --- entries as long as a case may hold, against numpy -------------------------------------------
+
+def _signed_sum(terms, signs) -> str:
+    return " ".join(f"{'-' if s < 0 else '+'} {t}" for t, s in zip(terms, signs)).removeprefix("+ ")
+
+
+def test_a_long_affine_entry_agrees_with_numpy():
+    """100 terms (399 tokens, the limit is 400): the affine form holds every coefficient."""
+    rng = np.random.default_rng(1)
+    n = 100
+    c = np.round(rng.uniform(0.1, 9.9, n), 4)
+    signs = rng.choice([-1.0, 1.0], n)
+    params = [f"p{k}" for k in range(n)]
+    text = _signed_sum([f"{c[k]:.4f}*p{k}" for k in range(n)], signs)
+    e = compile_entry(text, {}, params, "F[0][0]")
+    assert e.affine is not None and e.parameters == tuple(params)
+    np.testing.assert_allclose([w for _, w in e.affine[1]], signs * c, rtol=1e-15)
+    theta = rng.uniform(-3.0, 3.0, n)
+    v, g = e.value_and_gradient(theta)
+    assert v == pytest.approx(float(np.dot(signs * c, theta)), rel=1e-12)
+    np.testing.assert_allclose(g, signs * c, rtol=1e-15)
+
+
+def test_a_long_sum_of_products_agrees_with_numpy():
+    """60 products of two parameters and a constant (359 tokens): value and exact gradient."""
+    rng = np.random.default_rng(2)
+    n = 60
+    c = np.round(rng.uniform(0.1, 9.9, n), 3)
+    signs = rng.choice([-1.0, 1.0], n)
+    params = [f"p{k}" for k in range(n)] + [f"q{k}" for k in range(n)]
+    text = _signed_sum([f"{c[k]:.3f}*p{k}*q{k}" for k in range(n)], signs)
+    e = compile_entry(text, {}, params, "F[0][0]")
+    assert e.affine is None
+    theta = rng.uniform(-2.0, 2.0, 2 * n)
+    p, q = theta[:n], theta[n:]
+    v, g = e.value_and_gradient(theta)
+    assert v == pytest.approx(float(np.sum(signs * c * p * q)), rel=1e-12)
+    assert e.value(theta) == v
+    np.testing.assert_allclose(g, np.concatenate([signs * c * q, signs * c * p]), rtol=1e-12)
+
+
+def test_a_long_polynomial_in_horner_form_agrees_with_numpy_polyval():
+    """c0 + x*(c1 + x*(c2 + ... x*(c39))): 40 coefficients nested 39 deep (the limit is 50);
+    value and d/dx against numpy's polynomial evaluation."""
+    rng = np.random.default_rng(3)
+    c = np.round(rng.uniform(-1.0, 1.0, 40), 5)
+    text = f"{c[-1]:.5f}"
+    for ck in c[-2::-1]:
+        text = f"{ck:.5f} + x*({text})"
+    e = compile_entry(text, {}, ["a", "x"], "F[0][0]")
+    assert e.affine is None and e.parameters == ("x",)
+    for x in (-1.3, -0.4, 0.0, 0.7, 1.1):
+        v, g = e.value_and_gradient(np.array([5.0, x]))
+        assert v == pytest.approx(np.polyval(c[::-1], x), rel=1e-12, abs=1e-12)
+        assert g[0] == 0.0
+        assert g[1] == pytest.approx(np.polyval(np.polyder(c[::-1]), x), rel=1e-11, abs=1e-11)

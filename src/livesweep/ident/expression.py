@@ -18,7 +18,12 @@ become indices into the parameter vector ``theta``), folds constants and keeps a
 ``c0 + sum_k c_k theta_k`` whenever the entry is affine in the parameters (nearly every entry of a
 stability-derivative model), so matrices and their parameter derivatives are assembled without
 walking trees. Non-affine entries (products or quotients of parameters) are evaluated, with their
-exact gradient, by forward-mode differentiation of the tree.
+exact gradient, from a post-order instruction list compiled once per entry (one pass for the
+value, one reverse pass for the gradient).
+
+Cost: tokenizing, parsing, resolving, the affine form, the names an entry uses and every value or
+gradient are linear in the entry's length (each character, token and node handled a bounded
+number of times; ``benchmarks/bench_expression.py`` times them).
 
 Every error is a :class:`~livesweep.errors.ConfigError` naming the entry, e.g.
 ``F[0][2] = 'Yr - U1': unknown name 'U1'``.
@@ -33,7 +38,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -49,6 +54,7 @@ _TOKEN = re.compile(r"""
     | (?P<name>[A-Za-z_][A-Za-z0-9_]*)
     | (?P<op>[-+*/()])
     )""", re.VERBOSE)
+_SPACE = re.compile(r"\s*")
 
 
 # --- AST ---------------------------------------------------------------------------------------
@@ -103,13 +109,12 @@ def _tokenize(text: str, where: str):
     tokens = []
     pos, n = 0, len(text)
     while pos < n:
-        if text[pos:].strip() == "":
+        col = _SPACE.match(text, pos).end()          # the next non-space character (no copy of the rest)
+        if col == n:
             break
         m = _TOKEN.match(text, pos)
         if m is None or m.end() == pos:
-            bad = text[pos:].lstrip()[:1]
-            col = len(text) - len(text[pos:].lstrip())
-            raise ConfigError(f"{where}{quote(text)}: unexpected character {bad!r} at position {col}")
+            raise ConfigError(f"{where}{quote(text)}: unexpected character {text[col]!r} at position {col}")
         kind = m.lastgroup
         tokens.append((kind, m.group(kind), m.start(kind)))
         if len(tokens) > MAX_EXPRESSION_TOKENS:
@@ -241,15 +246,17 @@ def parse(text, where: str = "") -> Node:
 
 def names_in(node: Node) -> set[str]:
     """Every name the tree refers to."""
-    if isinstance(node, Name):
-        return {node.name}
-    if isinstance(node, _Param):
-        return {node.name}
-    if isinstance(node, Neg):
-        return names_in(node.operand)
-    if isinstance(node, BinOp):
-        return names_in(node.left) | names_in(node.right)
-    return set()
+    out: set[str] = set()
+    stack = [node]
+    while stack:
+        n = stack.pop()
+        if isinstance(n, (Name, _Param)):
+            out.add(n.name)
+        elif isinstance(n, Neg):
+            stack.append(n.operand)
+        elif isinstance(n, BinOp):
+            stack += (n.right, n.left)
+    return out
 
 
 def _apply(op: str, a, b):
@@ -277,81 +284,150 @@ def evaluate(node: Node, values: dict) -> float:
 # --- compiled entries --------------------------------------------------------------------------
 
 def _resolve(node: Node, constants: dict, index: dict, text, where: str) -> Node:
-    """Names -> numbers (constants) or _Param (parameters); constant subtrees folded."""
-    if isinstance(node, Num):
-        return node
-    if isinstance(node, Name):
-        if node.name in constants:
-            return Num(float(constants[node.name]))
-        if node.name in index:
-            return _Param(index[node.name], node.name)
-        raise ConfigError(f"{_where(where)}{quote(text)}: unknown name {node.name!r} (not a parameter or constant)")
-    if isinstance(node, Neg):
-        inner = _resolve(node.operand, constants, index, text, where)
-        return Num(-inner.value) if isinstance(inner, Num) else Neg(inner)
-    left = _resolve(node.left, constants, index, text, where)
-    right = _resolve(node.right, constants, index, text, where)
-    if isinstance(left, Num) and isinstance(right, Num):
-        if node.op == "/" and right.value == 0.0:
-            raise ConfigError(f"{_where(where)}{quote(text)}: division by zero")
-        value = float(_apply(node.op, left.value, right.value))
-        if not math.isfinite(value):
-            raise ConfigError(f"{_where(where)}{quote(text)}: the constant part {left.value!r} {node.op} "
-                              f"{right.value!r} overflows the float range")
-        return Num(value)
-    return BinOp(node.op, left, right)
+    """Names -> numbers (constants) or _Param (parameters); constant subtrees folded (one
+    post-order walk, left operands first)."""
+    done: list = []
+    stack = [(node, False)]
+    while stack:
+        n, ready = stack.pop()
+        if isinstance(n, Num):
+            done.append(n)
+        elif isinstance(n, Name):
+            if n.name in constants:
+                done.append(Num(float(constants[n.name])))
+            elif n.name in index:
+                done.append(_Param(index[n.name], n.name))
+            else:
+                raise ConfigError(f"{_where(where)}{quote(text)}: unknown name {n.name!r} (not a parameter or constant)")
+        elif not ready:
+            stack.append((n, True))
+            stack += [(n.operand, False)] if isinstance(n, Neg) else [(n.right, False), (n.left, False)]
+        elif isinstance(n, Neg):
+            inner = done.pop()
+            done.append(Num(-inner.value) if isinstance(inner, Num) else Neg(inner))
+        else:
+            right = done.pop()
+            left = done.pop()
+            if isinstance(left, Num) and isinstance(right, Num):
+                if n.op == "/" and right.value == 0.0:
+                    raise ConfigError(f"{_where(where)}{quote(text)}: division by zero")
+                value = float(_apply(n.op, left.value, right.value))
+                if not math.isfinite(value):
+                    raise ConfigError(f"{_where(where)}{quote(text)}: the constant part {left.value!r} {n.op} "
+                                      f"{right.value!r} overflows the float range")
+                done.append(Num(value))
+            else:
+                done.append(BinOp(n.op, left, right))
+    return done[0]
 
 
 def _affine(node: Node):
-    """(c0, {index: c}) when the resolved tree is affine in the parameters, else None."""
-    if isinstance(node, Num):
-        return node.value, {}
-    if isinstance(node, _Param):
-        return 0.0, {node.index: 1.0}
-    if isinstance(node, Neg):
-        a = _affine(node.operand)
-        return None if a is None else (-a[0], {k: -v for k, v in a[1].items()})
-    a, b = _affine(node.left), _affine(node.right)
-    if a is None or b is None:
-        return None
-    if node.op in "+-":
-        sign = 1.0 if node.op == "+" else -1.0
-        coef = dict(a[1])
-        for k, v in b[1].items():
-            coef[k] = coef.get(k, 0.0) + sign * v
-        return a[0] + sign * b[0], coef
-    if node.op == "*":
-        if not a[1]:
-            return a[0] * b[0], {k: a[0] * v for k, v in b[1].items()}
-        if not b[1]:
-            return a[0] * b[0], {k: b[0] * v for k, v in a[1].items()}
-        return None
-    if not b[1]:                                   # division by a constant (non-zero: folded check)
-        return a[0] / b[0], {k: v / b[0] for k, v in a[1].items()}
-    return None
+    """(c0, {index: c}) when the resolved tree is affine in the parameters, else None.
+
+    One walk: each node passes the factor it is multiplied by down to its operands, which add
+    their terms into one dictionary (a constant subtree is a :class:`Num` after
+    :func:`_resolve`).
+    """
+    coef: dict = {}
+    c0 = 0.0
+    stack = [(node, 1.0)]
+    while stack:
+        n, scale = stack.pop()
+        if isinstance(n, Num):
+            c0 += scale * n.value
+        elif isinstance(n, _Param):
+            coef[n.index] = coef.get(n.index, 0.0) + scale
+        elif isinstance(n, Neg):
+            stack.append((n.operand, -scale))
+        elif n.op in "+-":
+            stack.append((n.right, scale if n.op == "+" else -scale))
+            stack.append((n.left, scale))
+        elif n.op == "*" and isinstance(n.left, Num):
+            stack.append((n.right, scale * n.left.value))
+        elif n.op == "*" and isinstance(n.right, Num):
+            stack.append((n.left, scale * n.right.value))
+        elif n.op == "/" and isinstance(n.right, Num):     # non-zero: a zero divisor is refused when folded
+            stack.append((n.left, scale / n.right.value))
+        else:                                              # a product or quotient of parameters
+            return None
+    return c0, coef
 
 
-def _forward(node: Node, theta: np.ndarray):
-    """(value, gradient) of a resolved tree by forward-mode differentiation."""
-    if isinstance(node, Num):
-        return np.float64(node.value), np.zeros(theta.size)
-    if isinstance(node, _Param):
-        g = np.zeros(theta.size)
-        g[node.index] = 1.0
-        return np.float64(theta[node.index]), g
-    if isinstance(node, Neg):
-        v, g = _forward(node.operand, theta)
-        return -v, -g
-    a, ga = _forward(node.left, theta)
-    b, gb = _forward(node.right, theta)
-    if node.op == "+":
-        return a + b, ga + gb
-    if node.op == "-":
-        return a - b, ga - gb
-    if node.op == "*":
-        return a * b, ga * b + a * gb
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        return a / b, (ga * b - a * gb) / (b * b)
+def _program(node: Node) -> tuple:
+    """The resolved tree as post-order instructions ``(op, a, b)``: ``("num", value, 0)``,
+    ``("par", index, 0)``, ``("neg", slot, 0)`` or ``(operator, left slot, right slot)``; the
+    last instruction computes the entry."""
+    code: list = []
+    slots: list = []
+    stack = [(node, False)]
+    while stack:
+        n, ready = stack.pop()
+        if isinstance(n, Num):
+            code.append(("num", float(n.value), 0))
+        elif isinstance(n, _Param):
+            code.append(("par", n.index, 0))
+        elif not ready:
+            stack.append((n, True))
+            stack += [(n.operand, False)] if isinstance(n, Neg) else [(n.right, False), (n.left, False)]
+            continue
+        elif isinstance(n, Neg):
+            code.append(("neg", slots.pop(), 0))
+        else:
+            b = slots.pop()
+            code.append((n.op, slots.pop(), b))
+        slots.append(len(code) - 1)
+    return tuple(code)
+
+
+def _run(code: tuple, theta: np.ndarray) -> list:
+    """The value of every instruction of :func:`_program` for ``theta`` (float64; division by
+    zero gives inf/nan)."""
+    v: list = [None] * len(code)
+    with np.errstate(all="ignore"):
+        for k, (op, a, b) in enumerate(code):
+            if op == "num":
+                v[k] = np.float64(a)
+            elif op == "par":
+                v[k] = theta[a]
+            elif op == "neg":
+                v[k] = -v[a]
+            elif op == "+":
+                v[k] = v[a] + v[b]
+            elif op == "-":
+                v[k] = v[a] - v[b]
+            elif op == "*":
+                v[k] = v[a] * v[b]
+            else:
+                v[k] = v[a] / v[b]
+    return v
+
+
+def _gradient(code: tuple, v: list, size: int) -> np.ndarray:
+    """d(entry)/d(theta) by one reverse pass over :func:`_program`'s instructions and their values."""
+    g = np.zeros(size)
+    adj = [0.0] * len(code)
+    adj[-1] = 1.0
+    with np.errstate(all="ignore"):
+        for k in range(len(code) - 1, -1, -1):
+            op, a, b = code[k]
+            d = adj[k]
+            if op == "par":
+                g[a] += d
+            elif op == "neg":
+                adj[a] -= d
+            elif op == "+":
+                adj[a] += d
+                adj[b] += d
+            elif op == "-":
+                adj[a] += d
+                adj[b] -= d
+            elif op == "*":
+                adj[a] += d * v[b]
+                adj[b] += d * v[a]
+            elif op == "/":
+                adj[a] += d / v[b]
+                adj[b] -= d * v[a] / (v[b] * v[b])
+    return g
 
 
 @dataclass(frozen=True)
@@ -370,6 +446,8 @@ class CompiledEntry:
         Parameters the entry depends on.
     affine : tuple or None
         ``(c0, ((index, c), ...))`` when the entry is ``c0 + sum c theta[index]``, else None.
+    program : tuple
+        The tree as post-order instructions (how a non-affine entry is evaluated).
     """
 
     text: str
@@ -377,6 +455,11 @@ class CompiledEntry:
     tree: Node
     parameters: tuple
     affine: tuple | None
+    program: tuple = field(default=(), compare=False, repr=False)
+
+    def __post_init__(self):
+        if not self.program:
+            object.__setattr__(self, "program", _program(self.tree))
 
     @property
     def is_constant(self) -> bool:
@@ -388,8 +471,7 @@ class CompiledEntry:
         if self.affine is not None:
             c0, terms = self.affine
             return c0 + sum(c * theta[k] for k, c in terms)
-        with np.errstate(all="ignore"):
-            return float(_forward(self.tree, np.asarray(theta, float))[0])
+        return float(_run(self.program, np.asarray(theta, float))[-1])
 
     def value_and_gradient(self, theta):
         """``(value, d value / d theta)`` for the full parameter vector ``theta`` (exact)."""
@@ -400,9 +482,8 @@ class CompiledEntry:
             for k, c in terms:
                 g[k] += c
             return c0 + float(g @ theta), g
-        with np.errstate(all="ignore"):
-            v, g = _forward(self.tree, theta)
-        return float(v), g
+        v = _run(self.program, theta)
+        return float(v[-1]), _gradient(self.program, v, theta.size)
 
 
 def compile_entry(text, constants: dict, parameters, where: str = "") -> CompiledEntry:
