@@ -17,6 +17,13 @@ Budget
   of: the transforms of one window length (signals x segments x frequencies), its spectral
   matrix (signals x signals x frequencies), and the composite responses
   (outputs x inputs x n_freq x windows).
+* Models: a transfer-function numerator or denominator is of order at most :data:`MAX_TF_ORDER`;
+  a state-space model has at most :data:`MAX_MODEL_DIMENSION` states, inputs and outputs.
+* The live monitor (``monitor``, ``replay``; its settings from a map, a case, the command line or
+  a recording): at most :data:`MAX_MONITOR_PAIRS` pairs, an estimate at most every
+  :data:`MIN_UPDATE_PERIOD_S`, a sliding window of at most :data:`MAX_WINDOW_S` holding at most
+  :data:`MAX_RECORD_VALUES` samples x signals, and its segment transforms at most
+  :data:`MAX_SPECTRAL_VALUES` values.
 * Text: a case file is at most :data:`MAX_CONFIG_BYTES`; a matrix entry of a state-space model at
   most :data:`MAX_EXPRESSION_CHARS` characters, :data:`MAX_EXPRESSION_TOKENS` tokens and
   :data:`MAX_EXPRESSION_DEPTH` levels of parentheses and signs (real entries are a few terms).
@@ -29,8 +36,8 @@ import math
 __all__ = [
     "MAX_CONFIG_BYTES", "MAX_SAMPLE_RATE_HZ", "MAX_N_FREQ", "MAX_WINDOWS", "MAX_WINDOW_S",
     "MAX_RECORD_VALUES", "MAX_SPECTRAL_VALUES", "MAX_NAME_CHARS", "MAX_MODEL_DIMENSION",
-    "MAX_EXPRESSION_CHARS", "MAX_EXPRESSION_TOKENS", "MAX_EXPRESSION_DEPTH",
-    "window_spectra_values",
+    "MAX_EXPRESSION_CHARS", "MAX_EXPRESSION_TOKENS", "MAX_EXPRESSION_DEPTH", "MAX_TF_ORDER",
+    "MIN_UPDATE_PERIOD_S", "MAX_MONITOR_PAIRS", "window_spectra_values",
 ]
 
 #: Largest case file or channel map [bytes] (real ones are a few kB).
@@ -57,6 +64,14 @@ MAX_EXPRESSION_CHARS = 2_000
 MAX_EXPRESSION_TOKENS = 400
 #: Deepest nesting of parentheses and unary signs in a matrix-entry expression.
 MAX_EXPRESSION_DEPTH = 50
+#: Shortest update period of the live monitor [s of data] (default 0.2 s; the view refreshes at 1 Hz).
+MIN_UPDATE_PERIOD_S = 0.05
+#: Most input/output pairs the live monitor analyses (the presets: 9 to 15; each pair costs about
+#: 0.1 ms of a core per estimate).
+MAX_MONITOR_PAIRS = 200
+#: Highest order (degree in s) of a transfer-function numerator or denominator (real ones are 0 to 6;
+#: at a few hundred the fit's float64 polynomial coefficients overflow and its cost is undefined).
+MAX_TF_ORDER = 20
 
 
 def window_spectra_values(n_signals: int, n_samples: int, sample_rate_hz: float, window_s: float,

@@ -44,15 +44,19 @@ from typing import Mapping, Sequence
 import numpy as np
 from scipy.optimize import least_squares
 
-from livesweep.errors import ConfigError
+from livesweep.errors import ConfigError, quote
 from livesweep.ident.cost import PairData, fit_points, residuals
+from livesweep.limits import MAX_TF_ORDER
 from livesweep.numbers import frozen_array
 from livesweep.spectral.response import FrequencyResponse
 
 __all__ = ["Factor", "Structure", "parse_structure", "TransferFunctionModel", "FittedTransferFunction",
-           "fit_transfer_function", "RESERVED_NAMES"]
+           "fit_transfer_function", "RESERVED_NAMES", "STRUCTURE_PREFIXES"]
 
 RESERVED_NAMES = frozenset({"gain", "tau"})
+#: The prefix :func:`parse_structure` gives the generated parameter names of a plain-order
+#: numerator and denominator (so a numerator ``"2"`` and a denominator ``"2"`` do not share names).
+STRUCTURE_PREFIXES = {"numerator": "n", "denominator": "d"}
 
 _NAME = r"[A-Za-z_][A-Za-z0-9_]*"
 _NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
@@ -153,12 +157,12 @@ def _arg(tok: str, text: str, what: str):
     """(name, None) for a parameter name, (None, value) for a number."""
     if _RE_NAME.fullmatch(tok):
         if tok in RESERVED_NAMES:
-            raise ConfigError(f"transfer-function structure {text!r}: parameter name {tok!r} is reserved "
+            raise ConfigError(f"transfer-function structure {quote(text)}: parameter name {quote(tok)} is reserved "
                               f"({', '.join(sorted(RESERVED_NAMES))} name the gain and the delay)")
         return tok, None
     v = float(tok)
     if not math.isfinite(v):
-        raise ConfigError(f"transfer-function structure {text!r}: {what} {tok!r} is not finite")
+        raise ConfigError(f"transfer-function structure {quote(text)}: {what} {quote(tok)} is not finite")
     return None, v
 
 
@@ -187,33 +191,47 @@ def parse_structure(text, *, prefix: str = "") -> Structure:
     ------
     ConfigError
         Naming the token that is not a factor, a repeated or reserved parameter name, a zero
-        time constant or a non-positive fixed natural frequency.
+        time constant, a non-positive fixed natural frequency or an order (degree in s) above
+        :data:`livesweep.limits.MAX_TF_ORDER`.
     """
     if isinstance(text, bool) or not isinstance(text, (str, int)):
-        raise ConfigError(f"transfer-function structure must be text or an order, got {text!r}")
+        raise ConfigError(f"transfer-function structure must be text or an order, got {quote(text)}")
     src = str(text)
     t = src.strip()
     factors: list[Factor] = []
+
+    def too_high(order) -> ConfigError:
+        return ConfigError(f"transfer-function structure {quote(src)}: order {order} is above the limit of "
+                           f"{MAX_TF_ORDER}")
+
     if re.fullmatch(r"\d+", t or "0"):
+        if len(t) > 6:                                  # no int() of thousands of digits
+            raise too_high(quote(t))
         n = int(t or "0")
-        if n > 20:
-            raise ConfigError(f"transfer-function structure {src!r}: order {n} is too high (at most 20)")
+        if n > MAX_TF_ORDER:
+            raise too_high(n)
         if n % 2:
             factors.append(Factor("first", (f"T_{prefix}1",), (None,)))
         for i in range(n // 2):
             factors.append(Factor("second", (f"zeta_{prefix}{i + 1}", f"w_{prefix}{i + 1}"), (None, None)))
         return Structure(tuple(factors), src)
-    for tok in _RE_TOKEN.findall(t):
+    order = 0
+    for match in _RE_TOKEN.finditer(t):
+        tok = match.group()
         if m := _RE_S.fullmatch(tok):
+            if len(m.group(1) or "") > 6:
+                raise too_high(f"{m.group(1)[:7]}... or more")
             p = int(m.group(1) or 1)
             if p < 1:
-                raise ConfigError(f"transfer-function structure {src!r}: bad factor {tok!r} (power of s must be >= 1)")
+                raise ConfigError(f"transfer-function structure {quote(src)}: bad factor {quote(tok)} "
+                                  "(power of s must be >= 1)")
             factors.append(Factor("s", (), (), p))
         elif m := _RE_FIRST.fullmatch(tok):
             name, val = _arg(m.group(1), src, "time constant")
             if name is None:
                 if val == 0:
-                    raise ConfigError(f"transfer-function structure {src!r}: factor {tok!r} has a zero time constant")
+                    raise ConfigError(f"transfer-function structure {quote(src)}: factor {quote(tok)} has a zero "
+                                      "time constant")
                 factors.append(Factor("first", (None,), (1.0 / val,)))
             else:
                 factors.append(Factor("first", (name,), (None,)))
@@ -221,18 +239,22 @@ def parse_structure(text, *, prefix: str = "") -> Structure:
             zn, zv = _arg(m.group(1), src, "damping")
             wn, wv = _arg(m.group(2), src, "natural frequency")
             if wn is None and not wv > 0:
-                raise ConfigError(f"transfer-function structure {src!r}: factor {tok!r} needs a natural frequency > 0")
+                raise ConfigError(f"transfer-function structure {quote(src)}: factor {quote(tok)} needs a natural "
+                                  "frequency > 0")
             factors.append(Factor("second", (zn, wn), (zv, wv)))
         else:
-            raise ConfigError(f"transfer-function structure {src!r}: bad factor {tok!r} (expected s, s^n, "
+            raise ConfigError(f"transfer-function structure {quote(src)}: bad factor {quote(tok)} (expected s, s^n, "
                               "(1/T), [zeta, w] with names or numbers, or a plain order such as 2)")
+        order += factors[-1].n_roots
+        if order > MAX_TF_ORDER:          # stop at the limit, not after a crafted text's millions of factors
+            raise too_high(order if match.end() == len(t) else f"{order} or more")
     seen: set = set()
     for f in factors:
         for n in f.names:
             if n is None:
                 continue
             if n in seen:
-                raise ConfigError(f"transfer-function structure {src!r}: parameter name {n!r} is used twice")
+                raise ConfigError(f"transfer-function structure {quote(src)}: parameter name {quote(n)} is used twice")
             seen.add(n)
     return Structure(tuple(factors), src)
 
@@ -261,10 +283,9 @@ class TransferFunctionModel:
     input: str | None = None
 
     def __post_init__(self):
-        if not isinstance(self.numerator, Structure):
-            object.__setattr__(self, "numerator", parse_structure(self.numerator, prefix="n"))
-        if not isinstance(self.denominator, Structure):
-            object.__setattr__(self, "denominator", parse_structure(self.denominator, prefix="d"))
+        for key, prefix in STRUCTURE_PREFIXES.items():
+            if not isinstance(getattr(self, key), Structure):
+                object.__setattr__(self, key, parse_structure(getattr(self, key), prefix=prefix))
         common = set(self.numerator.parameter_keys) & set(self.denominator.parameter_keys)
         if common:
             raise ConfigError(f"transfer function {self.name!r}: parameter {sorted(common)[0]!r} appears in both "

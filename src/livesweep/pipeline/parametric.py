@@ -13,7 +13,8 @@ import numpy as np
 from livesweep.config import Case, require_table
 from livesweep.errors import ConfigError, check_band, quote
 from livesweep.ident.cost import MIN_COHERENCE, fit_points
-from livesweep.ident.transfer_function import TransferFunctionModel, fit_transfer_function
+from livesweep.ident.transfer_function import (STRUCTURE_PREFIXES, TransferFunctionModel, fit_transfer_function,
+                                               parse_structure)
 from livesweep.spectral.response import FrequencyResponseSet
 
 __all__ = ["TransferFunctionSpec", "TransferFunctionStage", "transfer_function_specs", "run_transfer_function_stage",
@@ -124,8 +125,15 @@ def transfer_function_specs(case: Case) -> tuple[TransferFunctionSpec, ...]:
     for name, raw in (case.tables.get("transfer_functions") or {}).items():
         t = _tf_table(case, name, raw)
         where = f"{case.path}: transfer_functions.{name}"
+        structures = {}
+        for key, prefix in STRUCTURE_PREFIXES.items():
+            try:
+                structures[key] = parse_structure(t.get(key, ""), prefix=prefix)
+            except ConfigError as exc:
+                raise ConfigError(f"{where}.{key}: {exc}") from None
         try:
-            model = TransferFunctionModel(name=name, numerator=t.get("numerator", ""), denominator=t["denominator"],
+            model = TransferFunctionModel(name=name, numerator=structures["numerator"],
+                                          denominator=structures["denominator"],
                                           delay=bool(t.get("delay", True)), output=t["output"], input=t["input"])
         except ConfigError as exc:
             raise ConfigError(f"{where}: {exc}") from None

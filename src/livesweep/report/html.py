@@ -174,7 +174,8 @@ def _transfer_functions(report: dict) -> str:
                     f"<td class='num'>{_num(t['gain'])}</td><td>{e(' '.join(num) or '1')}</td><td>{e(' '.join(den) or '1')}"
                     f"</td><td class='num'>{_num(1000 * t['delay_s'] if t.get('delay_s') is not None else None, '.1f')}</td>"
                     f"<td>{'%.2f – %.2f' % tuple(band) if len(band) == 2 else ''}</td>"
-                    f"<td class='num {'flag' if t['cost'] > g['cost_tf'] else ''}'>{t['cost']:.1f}</td>"
+                    f"<td class='num {'flag' if t['cost'] is None or t['cost'] > g['cost_tf'] else ''}'>"
+                    f"{_num(t['cost'], '.1f')}</td>"
                     f"<td class='{'flag' if bad_cr else ''}'>{e(crs)}</td></tr>")
     hq = []
     for t in tfs:

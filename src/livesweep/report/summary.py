@@ -13,7 +13,7 @@ from livesweep.ident.accuracy import MAX_COST, MAX_COST_AVERAGE, MAX_CRAMER_RAO_
 from livesweep.ident.verify import J_RMS_MAX, TIC_MAX
 from livesweep.spectral.adequacy import MAX_RANDOM_ERROR, MIN_COHERENCE
 
-__all__ = ["GUIDELINES", "stage_summary", "modes", "cr_text"]
+__all__ = ["GUIDELINES", "stage_summary", "modes", "cr_text", "figure"]
 
 #: The guidelines the flags test (method: Tischler & Remple; the report's appendix).
 GUIDELINES = {
@@ -38,6 +38,12 @@ def cr_text(pct) -> str:
     if pct > GUIDELINES["not_identifiable_pct"]:
         return f"> {GUIDELINES['not_identifiable_pct']:.0f} (not identifiable)"
     return f"{pct:.1f}"
+
+
+def figure(value, spec: str) -> str:
+    """A figure of the report (``None`` where it could not be computed, e.g. a cost that is not
+    finite) formatted with ``spec``, or ``"n/a"``."""
+    return "n/a" if value is None else format(value, spec)
 
 
 def modes(eigenvalues) -> list[dict]:
@@ -109,10 +115,12 @@ def stage_summary(report: dict) -> list[dict]:
     if "transfer-functions" in ran:
         flags, parts = [], []
         for t in report.get("transfer_functions") or []:
-            parts.append(f"{t['name']} J {t['cost']:.1f}")
+            parts.append(f"{t['name']} J {figure(t['cost'], '.1f')}")
             if not t.get("converged", True):
                 flags.append(f"{t['name']}: the fit did not converge")
-            if t["cost"] > g["cost_tf"]:
+            if t["cost"] is None:
+                flags.append(f"{t['name']}: J not finite")
+            elif t["cost"] > g["cost_tf"]:
                 flags.append(f"{t['name']}: J = {t['cost']:.0f} > {g['cost_tf']:.0f}")
             bad = [k for k, v in (t.get("cramer_rao_pct") or {}).items() if v is None or v > g["cramer_rao_pct"]]
             if bad:
@@ -160,10 +168,11 @@ def stage_summary(report: dict) -> list[dict]:
         ver = report["verification"]
         flags, parts = [], []
         for r in ver["records"]:
-            parts.append(f"{r['label']}: J_rms {r['j_rms']:.3f}")
+            parts.append(f"{r['label']}: J_rms {figure(r['j_rms'], '.3f')}")
             if r["j_rms"] is None or r["j_rms"] > g["j_rms"]:
-                flags.append(f"{r['label']}: J_rms = {r['j_rms']:.3f} > {g['j_rms']:g}")
-            high = [f"{o['name']} {o['tic']:.3f}" for o in r["outputs"] if o["tic"] is None or o["tic"] > g["tic"]]
+                flags.append(f"{r['label']}: J_rms = {figure(r['j_rms'], '.3f')} > {g['j_rms']:g}")
+            high = [f"{o['name']} {figure(o['tic'], '.3f')}" for o in r["outputs"]
+                    if o["tic"] is None or o["tic"] > g["tic"]]
             if high:
                 flags.append(f"{r['label']}: TIC > {g['tic']:g} on " + ", ".join(high))
         out.append(_row("verification", "; ".join(parts), flags))
