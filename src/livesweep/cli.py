@@ -34,6 +34,18 @@ def _check_out_path(path: str) -> Path:
     return p
 
 
+def _mavlink_system(text: str) -> tuple:
+    """``--sysid 1`` or ``1:1``: (system id, component id or None), each 0-255."""
+    parts = text.split(":")
+    try:
+        ids = [int(p) for p in parts]
+    except ValueError:
+        ids = []
+    if not 1 <= len(ids) <= 2 or not all(0 <= i <= 255 for i in ids):
+        raise argparse.ArgumentTypeError(f"{text!r} is not SYS or SYS:COMP (MAVLink ids 0-255)")
+    return ids[0], ids[1] if len(ids) == 2 else None
+
+
 def _positive_float(text: str) -> float:
     try:
         v = float(text)
@@ -265,18 +277,62 @@ def cmd_new_case(args) -> int:
     return 0
 
 
+#: Exit status of ``livesweep recover`` when messages (or other records) were lost or are kept
+#: unverified: the finished copy is still written.
+EXIT_DATA_LOST = 1
+
+
 def cmd_recover(args) -> int:
-    """``livesweep recover LOG``: a finished copy of an unfinished recording."""
-    from livesweep.telemetry.mcap_log import read_summary, recover
+    """``livesweep recover LOG``: a finished copy of an unfinished or damaged recording, saying what
+    was lost or kept unverified; exit status 0 only when nothing was."""
+    from livesweep.telemetry.mcap_recover import RECOVER_METADATA_NAME, recover
+
+    most = 10                                # offsets, ranges and lines printed before "... and N more"
+
+    def listed(items, fmt=str) -> str:
+        return ", ".join(fmt(x) for x in items[:most]) + (f" and {len(items) - most} more" if len(items) > most else "")
+
+    def count(n: int, what: str) -> str:
+        return f"{n} {what}" + ("" if n == 1 else "s")
 
     src = Path(args.log)
     out = Path(args.out) if args.out else src.with_name(src.stem + ".recovered.mcap")
     if out.exists() and not args.force:
         raise ConfigError(f"--out {str(out)!r} exists; give --force to replace it")
-    before = read_summary(src)
-    n = recover(src, out)
-    state = "was finished (copied)" if before.complete else f"was unfinished ({before.tail_error or 'no footer'})"
-    print(f"recover: {src} {state}; {n} messages written to {out}, which any MCAP reader opens")
+    r = recover(src, out)
+    state = ("was finished" if r.complete_source
+             else "was unfinished (no readable footer: its writer stopped before closing it, or its end is damaged)")
+    of = f" of the {r.messages_expected} it holds" if r.messages_expected is not None else ""
+    print(f"recover: {src} {state}; {count(r.messages_written, 'message')}{of} written to {out}, a finished "
+          "file any MCAP reader opens")
+    if r.messages_lost is None:
+        print("recover: LOST: an unknown number of messages (no readable statistics record or message index "
+              "counts them)")
+    elif r.messages_lost:
+        print(f"recover: LOST: {count(r.messages_lost, 'message')}" + (f" of {r.messages_expected}" if of else ""))
+    if r.damaged_chunks:
+        print(f"recover:   skipped {count(len(r.damaged_chunks), 'chunk')} that did not decompress, at bytes "
+              f"{listed(r.damaged_chunks)}")
+    if r.skipped_bytes:
+        total = sum(b - a for a, b in r.skipped_bytes)
+        print(f"recover:   {total} bytes not read: {listed(r.skipped_bytes, lambda ab: f'{ab[0]}-{ab[1]}')}")
+    if r.messages_unverified:
+        where = (f"{count(len(r.unverified_chunks), 'chunk')} failing the CRC check (at bytes "
+                 f"{listed(r.unverified_chunks)})" if r.unverified_chunks
+                 else "outside chunks in a data section that fails its CRC check")
+        print(f"recover: UNVERIFIED: {count(r.messages_unverified, 'message')} kept from {where}: their contents "
+              f"may differ from what was recorded; {out} records this in its {RECOVER_METADATA_NAME!r} metadata")
+    for line in r.unreadable[:most]:
+        print(f"recover:   {line}")
+    if len(r.unreadable) > most:
+        print(f"recover:   ... and {len(r.unreadable) - most} more")
+    for line in r.notes[:most]:
+        print(f"recover: note: {line}")
+    if len(r.notes) > most:
+        print(f"recover: note: ... and {len(r.notes) - most} more")
+    if not r.clean:
+        return EXIT_DATA_LOST
+    print("recover: nothing that was in the file was lost, and every message is verified")
     return 0
 
 
@@ -314,6 +370,10 @@ def _identify(args, case) -> int:
     return 0
 
 
+#: The monitor settings the command line sets, by the options that set them (for messages).
+_MONITOR_OPTIONS = {"window_s": "--window", "update_period_s": "--update-period"}
+
+
 def _monitor_settings(args):
     """Channel map, spectral and test-point settings from --map (a preset or a map file) or --case
     (default: the packaged XV-15 map) plus CLI overrides."""
@@ -332,18 +392,17 @@ def _monitor_settings(args):
     signals, spectral, path = chosen.signals, chosen.spectral, chosen.path
     if spectral is None:
         raise ConfigError(f"{path}: the monitor needs a [spectral] table (inputs, outputs, band_rad_s, sample_rate_hz)")
-    for name, value in (("--window", args.window), ("--update-period", args.update_period)):
-        if value is not None and not (math.isfinite(value) and value > 0):
-            raise ConfigError(f"{name} must be > 0, got {value!r}")
     return MonitorSettings(
         signals=signals, inputs=tuple(spectral.inputs), outputs=tuple(spectral.outputs),
         band_rad_s=tuple(spectral.band_rad_s), sample_rate_hz=spectral.sample_rate_hz,
-        window_s=args.window or DEFAULT_WINDOW_S, update_period_s=args.update_period or 0.2,
+        window_s=DEFAULT_WINDOW_S if args.window is None else args.window,
+        update_period_s=0.2 if args.update_period is None else args.update_period,
         required_pairs=_required_pairs(args.require, spectral),
         saturation_limits=_saturation_limits(args.saturation, spectral),
         references=tuple(spectral.references) if spectral.references else None,
         test_points=chosen.test_points, map_name=chosen.name, vehicle=dict(chosen.vehicle) or None,
-    )
+        system=getattr(args, "sysid", None) or chosen.system,
+    ).check_limits(str(path), names={**_MONITOR_OPTIONS, "outputs": f"{path}: spectral.outputs"})
 
 
 def _saturation_limits(items, spectral):
@@ -389,6 +448,22 @@ def _view(args, settings, name):
                      bind_host=args.rerun_bind)
 
 
+def _loss_text(src: dict) -> str:
+    """What a source lost, each kind by its own name: the kernel's drops (counted by the kernel),
+    MAVLink sequence gaps (an estimate), datagrams recorded but not decoded at the stop."""
+    parts = []
+    if src.get("kernel_drops"):
+        parts.append(f"{src['kernel_drops']} dropped by the kernel (socket buffer full; counted by the kernel)")
+    gaps = sum((src.get("seq_gaps") or {}).values())
+    if gaps:
+        parts.append(f"{gaps} missing by MAVLink's 8-bit sequence (an estimate: frames refused here and losses "
+                     "before this link count too; runs of 256 are not seen)")
+    if src.get("undecoded_at_stop"):
+        parts.append(f"{src['undecoded_at_stop']} recorded as received but not decoded at the stop "
+                     "(/link/mavlink holds them)")
+    return "loss: " + "; ".join(parts) if parts else ""
+
+
 def _print_monitor_summary(summary: dict, out=sys.stdout) -> None:
     from livesweep.monitor.pipeline import LINK_ANOMALIES
 
@@ -405,15 +480,19 @@ def _print_monitor_summary(summary: dict, out=sys.stdout) -> None:
     for src in counters.get("sources", []):
         received = src.get("received") or src.get("replayed") or {}
         systems = src.get("by_system") or {}
-        bad = {k: v for k, v in src.items() if k in anomaly_keys and v}
-        gaps = sum((src.get("seq_gaps") or {}).values())
+        bad = {k: v for k, v in src.items() if k in anomaly_keys and k != "kernel_drops" and v}
         by_sys = sorted(systems.items(), key=lambda kv: -kv[1])
         sys_text = ", ".join(f"{k}: {v}" for k, v in by_sys[:5]) + (f", ... ({len(by_sys)} systems)" if len(by_sys) > 5
                                                                      else "")
         print(f"  {src['name']}: {sum(received.values())} frames" + (f" from systems {{{sys_text}}}"
-              if systems else "") + (f"; {gaps} lost (sequence gaps)" if gaps else "")
-              + (f"; rejected or repaired: {bad}" if bad else "; nothing rejected"), file=out)
+              if systems else "") + (f"; rejected or repaired: {bad}" if bad else "; nothing rejected"), file=out)
+        loss = _loss_text(src)
+        if loss:
+            print(f"    {loss}", file=out)
     pipe = counters.get("pipeline") or {}
+    if pipe.get("not_taken_at_stop"):
+        print(f"  not recorded: {pipe['not_taken_at_stop']} frames a source still held when the stop's drain "
+              "time was up", file=out)
     if pipe.get("analysis_shed"):
         print(f"  analysis skipped {pipe['analysis_shed']} frames to keep up (all recorded)", file=out)
     from livesweep.monitor.text import test_point_line
@@ -566,7 +645,7 @@ def _recorded_settings(log: str):
         d = json.loads(raw)
     except ValueError as e:
         raise ConfigError(f"{log}: livesweep_settings.json is not JSON ({e}); give --case or --map") from None
-    return MonitorSettings.from_dict(d, where=f"{log}: livesweep_settings.json")
+    return MonitorSettings.from_dict(d, where=f"{log}: livesweep_settings.json", path=log)
 
 
 def cmd_replay(args) -> int:
@@ -584,12 +663,13 @@ def cmd_replay(args) -> int:
         settings = _recorded_settings(args.log)
         if settings is not None:
             print(f"replay: the settings recorded in {args.log} (give --case or --map to use others)")
-            overrides = {k: v for k, v in (("window_s", args.window), ("update_period_s", args.update_period))
-                         if v is not None}
+            overrides = {k: v for k, v in (("window_s", args.window), ("update_period_s", args.update_period),
+                                           ("system", args.sysid)) if v is not None}
             if args.require:
                 overrides["required_pairs"] = tuple(_pair(item, settings.inputs, settings.outputs)
                                                     for item in args.require)
-            settings = replace(settings, **overrides)
+            settings = replace(settings, **overrides).check_limits(
+                f"{args.log}: livesweep_settings.json", names={k: v for k, v in _MONITOR_OPTIONS.items() if k in overrides})
     if settings is None:
         settings = _monitor_settings(args)
     pipe = MonitorPipeline(settings, [McapReplaySource(args.log, speed=args.speed or 0.0)],
@@ -608,6 +688,9 @@ def _add_monitor_options(m) -> None:
     m.add_argument("--rerun-spawn", action="store_true", help="open the Rerun desktop viewer")
     m.add_argument("--rerun-serve", action="store_true", help="serve the Rerun web viewer")
     m.add_argument("--rerun-bind", default="127.0.0.1", help="address the Rerun web viewer binds (default 127.0.0.1)")
+    m.add_argument("--sysid", type=_mavlink_system, metavar="SYS[:COMP]",
+                   help="the MAVLink system (and component) to analyse; default: the map's [map].sysid, else the "
+                        "first vehicle that sends 10 frames of every mapped message (others are recorded, not analysed)")
     m.add_argument("--saturation", action="append", metavar="IN=LO:HI",
                    help="actuator limits for the saturation alert, e.g. da=-20:20 (repeatable)")
     m.add_argument("--require", action="append", metavar="OUT/IN",
@@ -849,6 +932,47 @@ _SMALL_BLAS_VERBS = ("identify", "batch", "demo")
 _BLAS_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 
+class _Signalled(SystemExit):
+    """Raised in the main thread by SIGTERM or SIGHUP (:func:`_unwind_on_signals`); exit status
+    ``128 + signal number``, as the signal itself would have given."""
+
+    def __init__(self, signum: int):
+        import signal
+
+        super().__init__(128 + signum)
+        self.name = signal.Signals(signum).name
+
+
+def _unwind_on_signals() -> dict:
+    """Make SIGTERM (``kill``, ``timeout``, systemd, ``docker stop``) and SIGHUP (a closed terminal)
+    raise :class:`_Signalled` instead of ending the process where it stands, so ``with`` blocks and
+    ``finally`` clauses run: an atomic writer deletes its ``.partial`` file, locks are released.
+
+    A signal ignored when the process started (``nohup``) stays ignored. A second signal ends the
+    process at once (the default action), should the unwinding itself hang. Commands that finish
+    their work on a signal (``monitor``) install their own handlers, which replace these. Nothing
+    is installed outside the main thread (Python runs signal handlers only there).
+
+    Returns
+    -------
+    dict
+        Signal -> the handler replaced, for :func:`main` to put back when the command returns.
+    """
+    import signal
+    import threading
+
+    def handler(signum, frame):
+        signal.signal(signum, signal.SIG_DFL)
+        raise _Signalled(signum)
+
+    replaced = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            if signal.getsignal(sig) == signal.SIG_DFL:
+                replaced[sig] = signal.signal(sig, handler)
+    return replaced
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     verb = next((a for a in argv if not a.startswith("-")), None)
@@ -859,6 +983,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if getattr(args, "axis", None) is None and args.verb == "sim":
         args.axis = [_default_axis(args.model)]
+    replaced = _unwind_on_signals()
     try:
         return args.func(args)
     except LivesweepError as exc:
@@ -867,6 +992,14 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("livesweep: interrupted", file=sys.stderr)
         return 130
+    except _Signalled as exc:
+        print(f"livesweep: {exc.name}: stopped", file=sys.stderr)
+        return exc.code
+    finally:
+        import signal
+
+        for sig, previous in replaced.items():
+            signal.signal(sig, previous)
 
 
 if __name__ == "__main__":  # pragma: no cover

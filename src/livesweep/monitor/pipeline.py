@@ -30,11 +30,11 @@ import sys
 import threading
 import time
 from collections import deque
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from livesweep.errors import ConfigError
+from livesweep.errors import ConfigError, quote, require_number
 from livesweep.monitor.alerts import ALERT_INTERVAL_S, AlertGate
 from livesweep.monitor.ingest import FrameQueue, Ingest
 from livesweep.monitor.testpoints import (CLOSE_WAIT_S, GCS_SYSID, GRID_TOL, LOST_AFTER_S, LOST_TOPIC, SOURCES,
@@ -122,6 +122,9 @@ class MonitorSettings:
     vehicle : dict of str -> tuple of float, optional
         The vehicle the map is made for (its ``[map.vehicle]``: ``FRAME_CLASS``, ``FRAME_TYPE``,
         ``MAV_TYPE``); checked against what the vehicle says of itself.
+    system : (int, int or None), optional
+        The MAVLink system and component to analyse (``--sysid``, ``[map].sysid``); None: the first
+        vehicle that sends every mapped message (:mod:`livesweep.telemetry.vehicle_choice`).
     """
 
     signals: dict
@@ -140,6 +143,7 @@ class MonitorSettings:
     test_points: object | None = None
     map_name: str | None = None
     vehicle: dict | None = None
+    system: tuple | None = None
 
     def to_dict(self) -> dict:
         """Everything a replay needs to run as the live monitor did (the recording's settings attachment)."""
@@ -158,33 +162,203 @@ class MonitorSettings:
                 "required": {k: list(v) for k, v in tp.required.items()}, "min_duration_s": tp.min_duration_s},
             "map_name": self.map_name,
             "vehicle": None if not self.vehicle else {k: list(v) for k, v in self.vehicle.items()},
+            "system": None if self.system is None else list(self.system),
         }
 
     @classmethod
-    def from_dict(cls, d: dict, *, where: str = "settings") -> "MonitorSettings":
-        """The settings :meth:`to_dict` wrote (a recording's ``livesweep_settings.json``); ConfigError
-        naming ``where`` and the key when something is missing or malformed."""
-        from livesweep.config import SignalSpec
+    def from_dict(cls, d: dict, *, where: str = "settings", path=None) -> "MonitorSettings":
+        """The settings :meth:`to_dict` wrote (a recording's ``livesweep_settings.json``).
 
+        Validated as a channel map file is (:func:`livesweep.config.channel_map_from_tables`: names,
+        fields, band, ``sample_rate_hz`` and every other limit a map gets) and then against the
+        monitor's own limits (:meth:`check_limits`), so a crafted recording cannot ask for more than
+        a map or the command line could.
+
+        Parameters
+        ----------
+        d : dict
+            The decoded JSON.
+        where : str
+            How messages name the settings, e.g. ``"rec.mcap: livesweep_settings.json"``.
+        path : str or os.PathLike, optional
+            The file they came from (default ``where``).
+
+        Raises
+        ------
+        ConfigError
+            One line naming ``where``, the key (as the JSON spells it) and the value.
+        """
+        from livesweep.config import channel_map_from_tables
+
+        if not isinstance(d, dict):
+            raise ConfigError(f"{where}: must be a JSON object of monitor settings, got {quote(d)}")
         try:
-            signals = {n: SignalSpec(**v) for n, v in d["signals"].items()}
-            tp = d.get("test_points")
-            return cls(
-                signals=signals, inputs=tuple(d["inputs"]), outputs=tuple(d["outputs"]),
-                band_rad_s=tuple(float(b) for b in d["band_rad_s"]), sample_rate_hz=float(d["sample_rate_hz"]),
-                window_s=float(d["window_s"]), segment_s=d.get("segment_s"),
-                update_period_s=float(d.get("update_period_s", 0.2)),
-                required_pairs=None if d.get("required_pairs") is None else tuple(tuple(p) for p in d["required_pairs"]),
-                references=None if not d.get("references") else tuple(d["references"]),
-                saturation_limits=None if not d.get("saturation_limits") else
-                {k: tuple(v) for k, v in d["saturation_limits"].items()},
-                test_points=None if tp is None else _test_point_settings(tp),
-                map_name=d.get("map_name"),
-                vehicle=None if not d.get("vehicle") else {str(k): tuple(float(x) for x in v)
-                                                           for k, v in d["vehicle"].items()},
-            )
-        except (KeyError, TypeError, ValueError, AttributeError) as e:
+            m = channel_map_from_tables(_map_tables(d), path if path is not None else where, where=where)
+        except ConfigError as e:           # the map's key paths, as the settings' JSON spells them
+            text = str(e)
+            for table, key in ((f"{where}: spectral: ", f"{where}: "), (f"{where}: spectral.", f"{where}: "),
+                               (f"{where}: map.vehicle", f"{where}: vehicle")):
+                if text.startswith(table):
+                    text = key + text[len(table):]
+                    break
+            raise ConfigError(text) from None
+        if m.spectral is None:
+            raise ConfigError(f"{where}: missing the spectral settings (inputs, outputs, band_rad_s, sample_rate_hz)")
+        sp = m.spectral
+        map_name = d.get("map_name")
+        if map_name is not None and not isinstance(map_name, str):
+            raise ConfigError(f"{where}: map_name: must be a string, got {quote(map_name)}")
+        try:
+            system = _system(d.get("system"))
+        except (TypeError, ValueError) as e:
             raise ConfigError(f"{where}: not monitor settings livesweep can use ({type(e).__name__}: {e})") from None
+        segment = d.get("segment_s")
+        settings = cls(
+            signals=m.signals, inputs=sp.inputs, outputs=sp.outputs, band_rad_s=sp.band_rad_s,
+            sample_rate_hz=sp.sample_rate_hz,
+            window_s=require_number(d["window_s"] if "window_s" in d else None, f"{where}: window_s"),
+            segment_s=None if segment is None else require_number(segment, f"{where}: segment_s"),
+            update_period_s=require_number(d.get("update_period_s", 0.2), f"{where}: update_period_s"),
+            references=sp.references, test_points=m.test_points, map_name=map_name,
+            vehicle=dict(m.vehicle) or None, system=system,
+        ).check_limits(where)
+        return replace(settings,
+                       required_pairs=_saved_pairs(d.get("required_pairs"), sp, f"{where}: required_pairs"),
+                       saturation_limits=_saved_saturation(d.get("saturation_limits"), sp,
+                                                           f"{where}: saturation_limits"))
+
+    def check_limits(self, where: str = "", names: dict | None = None) -> "MonitorSettings":
+        """These settings, or ConfigError when they ask for more than :mod:`livesweep.limits` allows
+        the live monitor: a window of at most ``MAX_WINDOW_S`` [s] holding at most
+        ``MAX_RECORD_VALUES`` samples x signals, with segment transforms of at most
+        ``MAX_SPECTRAL_VALUES`` values; a segment [s] no longer than the window; an update period of
+        at least ``MIN_UPDATE_PERIOD_S`` [s]; at most ``MAX_MONITOR_PAIRS`` pairs.
+
+        Parameters
+        ----------
+        where : str
+            What the message names first (the file the settings came from); may be empty.
+        names : dict of str -> str, optional
+            How the message calls a setting instead of ``"<where>: <attribute>"``, e.g.
+            ``{"update_period_s": "--update-period"}`` (``"outputs"`` names the pair count).
+
+        Returns
+        -------
+        MonitorSettings
+            ``self``.
+        """
+        import inspect
+
+        from livesweep import limits
+        from livesweep.spectral.online import default_segment_s
+
+        def error(key, problem, value):
+            label = (names or {}).get(key) or (f"{where}: {key}" if where else key)
+            return ConfigError(f"{label}: {problem}, got {quote(value)}")
+
+        window = self.window_s
+        if not (isinstance(window, (int, float)) and math.isfinite(window) and 0 < window <= limits.MAX_WINDOW_S):
+            raise error("window_s", f"the sliding window must be > 0 and at most {limits.MAX_WINDOW_S:g} s", window)
+        seg = self.segment_s
+        if seg is not None and not (isinstance(seg, (int, float)) and math.isfinite(seg) and 0 < seg <= window):
+            raise error("segment_s", f"a segment must be > 0 s and at most the sliding window ({window:g} s)", seg)
+        period = self.update_period_s
+        if not (isinstance(period, (int, float)) and math.isfinite(period) and period >= limits.MIN_UPDATE_PERIOD_S):
+            raise error("update_period_s", f"must be at least {limits.MIN_UPDATE_PERIOD_S:g} s", period)
+        pairs = len(self.inputs) * len(self.outputs)
+        if pairs > limits.MAX_MONITOR_PAIRS:
+            raise error("outputs", f"{len(self.outputs)} outputs x {len(self.inputs)} inputs = {pairs} pairs; the "
+                        f"monitor analyses at most {limits.MAX_MONITOR_PAIRS}", len(self.outputs))
+        n_signals = len(set((*self.inputs, *self.outputs, *(self.references or ()))))
+        fs = self.sample_rate_hz
+        samples = int(round(window * fs))
+        if samples * n_signals > limits.MAX_RECORD_VALUES:
+            raise error("window_s", f"{window:g} s x {fs:g} Hz x {n_signals} signals = {samples * n_signals} samples "
+                        f"in the sliding window; at most {limits.MAX_RECORD_VALUES}", window)
+        overlap = inspect.signature(OnlineSpectralEstimator).parameters["overlap"].default    # what the pipeline uses
+        values = limits.window_spectra_values(n_signals, samples, fs, seg or default_segment_s(self.band_rad_s, window),
+                                              overlap, self.band_rad_s)
+        if values > limits.MAX_SPECTRAL_VALUES:
+            raise error("window_s", f"its segment transforms hold {values} values; at most "
+                        f"{limits.MAX_SPECTRAL_VALUES} (a shorter window or fewer signals)", window)
+        return self
+
+
+def _map_tables(d: dict) -> dict:
+    """The channel-map part of saved settings, shaped as a map file's TOML tables."""
+    tables = {}
+    if "signals" in d:
+        sigs = d["signals"]
+        tables["signals"] = {n: _signal_table(v) for n, v in sigs.items()} if isinstance(sigs, dict) else sigs
+    spectral = {k: d[k] for k in ("inputs", "outputs", "band_rad_s", "sample_rate_hz", "references")
+                if d.get(k) is not None}
+    if spectral:
+        tables["spectral"] = spectral
+    if d.get("test_points") is not None:
+        tables["test_points"] = d["test_points"]
+    if d.get("vehicle"):
+        tables["map"] = {"vehicle": d["vehicle"]}
+    return tables
+
+
+def _signal_table(v):
+    """A saved :class:`~livesweep.config.SignalSpec` (``asdict``) as its ``[signals.NAME]`` table."""
+    if not isinstance(v, dict):
+        return v
+    t = {k: x for k, x in v.items() if k != "name" and x is not None}
+    if "stamp" not in t:
+        t.pop("stamp_scale", None)          # 1.0, the field's default, for a signal on receive time
+    where = t.get("where")
+    if isinstance(where, list):
+        if not where:
+            del t["where"]
+        elif all(isinstance(p, list) and len(p) == 2 and isinstance(p[0], str) for p in where):
+            t["where"] = dict(where)
+    return t
+
+
+def _saved_pairs(value, spectral, where: str) -> tuple | None:
+    """Saved ``required_pairs``: None or ``[[output, input], ...]`` of the spectral outputs and inputs."""
+    if value is None:
+        return None
+    if not isinstance(value, list) or len(value) > len(spectral.inputs) * len(spectral.outputs):
+        raise ConfigError(f"{where}: must be a list of [output, input] pairs of the spectral settings, got {quote(value)}")
+    for i, p in enumerate(value):
+        if not (isinstance(p, list) and len(p) == 2 and p[0] in spectral.outputs and p[1] in spectral.inputs):
+            raise ConfigError(f"{where}[{i}]: must be [output, input] with an output of {quote(list(spectral.outputs))} "
+                              f"and an input of {quote(list(spectral.inputs))}, got {quote(p)}")
+    return tuple((str(o), str(i)) for o, i in value)
+
+
+def _saved_saturation(value, spectral, where: str) -> dict | None:
+    """Saved ``saturation_limits``: None or ``{input: [low, high]}`` in input units, ``low < high``."""
+    if not value:
+        return None
+    if not isinstance(value, dict):
+        raise ConfigError(f"{where}: must be an object of input: [low, high], got {quote(value)}")
+    out = {}
+    for name, v in value.items():
+        ok = (name in spectral.inputs and isinstance(v, list) and len(v) == 2
+              and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)
+              and v[0] < v[1])
+        if not ok:
+            raise ConfigError(f"{where}.{quote(name)}: must be [low, high] with low < high, for an input of "
+                              f"{quote(list(spectral.inputs))}, got {quote(v)}")
+        out[name] = (float(v[0]), float(v[1]))
+    return out
+
+
+def _system(value) -> tuple | None:
+    """Saved ``system``: None or [sysid, compid or None], each a MAVLink id (0-255)."""
+    if value is None:
+        return None
+    sysid, compid = value
+    for v in (sysid, compid):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 255):
+            raise ValueError(f"system {value!r}: a MAVLink id is an integer from 0 to 255")
+    if sysid is None:
+        raise ValueError(f"system {value!r}: needs a system id")
+    return int(sysid), None if compid is None else int(compid)
 
 
 @dataclass(frozen=True)
@@ -212,15 +386,6 @@ class _Totals:
     wall_s: float = 0.0
     latency_s: deque = field(default_factory=lambda: deque(maxlen=10_000))
     verdict_latency_s: deque = field(default_factory=lambda: deque(maxlen=10_000))
-
-
-def _test_point_settings(d: dict):
-    """A map's test-point settings from their recorded dict."""
-    from livesweep.config import TestPointSettings
-
-    return TestPointSettings(sources=tuple(d["sources"]), axes={int(k): v for k, v in d["axes"].items()},
-                             required={k: tuple(v) for k, v in d["required"].items()},
-                             min_duration_s=float(d["min_duration_s"]))
 
 
 def _tracker(settings: MonitorSettings, names) -> TestPointTracker:
@@ -280,7 +445,8 @@ class MonitorPipeline:
         self.status_line = status_line
         self._status_frames = (time.monotonic(), 0)
         self.names = tuple(dict.fromkeys((*settings.inputs, *settings.outputs, *(settings.references or ()))))
-        self.aligner = GridAligner(settings.signals, self.names, settings.sample_rate_hz, max_fill_s=settings.window_s)
+        self.aligner = GridAligner(settings.signals, self.names, settings.sample_rate_hz, max_fill_s=settings.window_s,
+                                   system=settings.system)
         kw = {} if settings.segment_s is None else {"segment_s": settings.segment_s}
         self.estimator = OnlineSpectralEstimator(self.names, settings.inputs, settings.outputs,
                                                  settings.sample_rate_hz, settings.band_rad_s,
@@ -413,8 +579,8 @@ class MonitorPipeline:
                         self._take(f)
                     self.totals.analysed += len(frames)
                     pending += len(frames)
-                if pending:
-                    self._process(time.monotonic())
+                self.aligner.settle_choice()                 # a stream too short to choose in: its frames count
+                self._process(time.monotonic())
                 self._test_point_records(self.test_points.finish(self._t_data))
                 if self.view is not None:
                     self._flush_timeseries(time.monotonic(), force=True)
@@ -818,6 +984,7 @@ class MonitorPipeline:
             "pipeline": {"frames_received": self.totals.frames, "frames_analysed": self.totals.analysed,
                          "analysis_shed": self.analysis_shed, "ticks_skipped": self.totals.ticks_skipped,
                          "drained_at_stop": 0 if ingest is None else ingest.drained,
+                         "not_taken_at_stop": 0 if ingest is None else ingest.not_taken_at_stop,
                          "bad_publish_time": 0 if self.recorder is None else self.recorder.bad_publish_time,
                          "unrecordable": 0 if self.recorder is None else self.recorder.unrecordable},
         }
@@ -847,8 +1014,11 @@ class MonitorPipeline:
         self._seen_anomalies = counts
         systems = {str(k) for s in c["sources"] for k in (s.get("by_system") or {})}
         # a ground station on the link is normal (its markers count): another vehicle is worth saying
-        new_systems = sorted(systems - self._seen_systems - {str(GCS_SYSID)}) if self._seen_systems else []
-        self._seen_systems |= systems
+        # each system other than the one analysed, named once it is chosen
+        analysed = self.aligner.system
+        new_systems = [] if analysed is None else sorted(systems - self._seen_systems - {str(GCS_SYSID), str(analysed)},
+                                                         key=lambda k: (len(k), k))
+        self._seen_systems |= set(new_systems)
         words = {key: w for _, key, w in LINK_ANOMALIES}
         alerts = []
         for k, n in grew.items():                 # said at most every ALERT_INTERVAL_S, with all that grew since
@@ -859,8 +1029,10 @@ class MonitorPipeline:
                                 "(counted, see the summary)", float(sum(self._link_unsaid.values()))))
             self._link_unsaid, self._link_said = {}, now
         if new_systems:
+            al = self.aligner
+            follows = f"the analysis follows system {al.system} ({al.choice})"
             alerts.append(Alert("link", f"link: another system on the link (system id {', '.join(new_systems)}): "
-                                "recorded, but only the first system of each message type is analysed",
+                                f"recorded, not analysed; {follows}; --sysid names another",
                                 float(len(new_systems))))
         for a in alerts:
             self._record_alert(self._t_data, a)
@@ -898,6 +1070,7 @@ class MonitorPipeline:
         from livesweep.telemetry.extract import diagnose
 
         signals = {n: self.s.signals[n] for n in self.names}
+        self.aligner.settle_choice()
         self.map_problems = diagnose(signals, self.aligner.signal_counts, self._topics_seen)
         self._map_missing = [n for n in self.names if self.aligner.signal_counts[n]["samples"] == 0]
         if self.map_problems:
@@ -1011,6 +1184,7 @@ class MonitorPipeline:
             "wall_s": round(self.totals.wall_s, 3),
             "data_s": None if self._next_tick is None else round(self._next_tick - self.s.update_period_s - self._t_first, 3),
             "aligner": dict(self.aligner.counts),
+            "system": self.aligner.system, "system_choice": self.aligner.choice,
             "sources": [src.counts for src in self.sources],
             "counters": self.counters(),
             "alerts_recorded": self.alerts_raised,

@@ -83,7 +83,7 @@ from livesweep.monitor.freq_plot import (
 from livesweep.monitor.text import EPOCH_MIN_S, adequacy_markdown, coherence_kind_text, markdown_test_points
 from livesweep.spectral.adequacy import MIN_COHERENCE
 
-__all__ = ["RerunView", "find_rerun_cli", "series_label", "adequacy_markdown"]
+__all__ = ["RerunView", "find_rerun_cli", "series_label", "adequacy_markdown", "serve_banner"]
 
 log = logging.getLogger(__name__)
 
@@ -220,6 +220,53 @@ def _url_host(host: str) -> str:
     if host == "::":
         return "[::1]"
     return f"[{host}]" if ":" in host else host
+
+
+def _bound_scope(host: str) -> str:
+    """``"loopback"`` when ``host`` (an address or a name) binds this machine's loopback only,
+    ``"all"`` for the unspecified address (every interface), else ``"network"`` (a name that does not
+    resolve counts as reachable: the warning errs on the safe side)."""
+    import ipaddress
+
+    name = host.strip("[]")
+    if name in ("", "0.0.0.0", "::"):
+        return "all"
+    try:
+        addrs = {ipaddress.ip_address(name)}
+    except ValueError:
+        try:
+            addrs = {ipaddress.ip_address(a[4][0].split("%")[0])
+                     for a in socket.getaddrinfo(name, None, proto=socket.IPPROTO_TCP)}
+        except (OSError, ValueError):
+            return "network"
+    if any(a.is_unspecified for a in addrs):
+        return "all"
+    return "loopback" if addrs and all(a.is_loopback for a in addrs) else "network"
+
+
+def serve_banner(bind_host: str, web_port: int, grpc_port: int, web_url: str) -> str:
+    """The line printed when the web viewer is served: the URL to open, the address its two ports
+    are actually bound to and, when that is not a loopback address, a warning in the same line
+    (the viewer and its gRPC proxy have no authentication).
+
+    Parameters
+    ----------
+    bind_host : str
+        The address given to ``rerun --bind`` (``--rerun-bind``).
+    web_port, grpc_port : int
+        The web viewer's and the gRPC proxy's TCP ports.
+    web_url : str
+        The address to open in a browser on this machine.
+    """
+    shown = bind_host if bind_host else "0.0.0.0"
+    shown = f"[{shown}]" if ":" in shown and not shown.startswith("[") else shown
+    bound = f"bound to {shown} ports {int(web_port)} (web) and {int(grpc_port)} (gRPC)"
+    scope = _bound_scope(bind_host)
+    if scope == "loopback":
+        return f"livesweep: Rerun web viewer at {web_url} ({bound}: this machine only)"
+    where = "every interface" if scope == "all" else "not a loopback address"
+    return (f"livesweep: Rerun web viewer at {web_url} ({bound}: WARNING: {where}, anyone who can reach this "
+            "machine on those ports sees the live data, without authentication)")
 
 
 def _port_open(host: str, port: int) -> bool:
@@ -432,7 +479,7 @@ class RerunView:
                 self.grpc_url, self.web_url = self._server.grpc_url, self._server.web_url
                 sinks.append(rr.GrpcSink(self.grpc_url))
                 log.info("Rerun web viewer at %s (gRPC %s)", self.web_url, self.grpc_url)
-                print(f"livesweep: Rerun web viewer at {self.web_url}", file=sys.stderr, flush=True)
+                print(serve_banner(bind_host, web_port, grpc_port, self.web_url), file=sys.stderr, flush=True)
             if spawn:
                 self.rec.spawn(port=int(grpc_port), connect=False, hide_welcome_screen=True)
                 self.grpc_url = f"rerun+http://127.0.0.1:{int(grpc_port)}/proxy"
