@@ -28,8 +28,8 @@ from livesweep.telemetry.mcap_log import (
     read_messages,
     read_metadata,
     read_summary,
-    recover,
 )
+from livesweep.telemetry.mcap_recover import recover
 
 ATT_SCHEMA = {
     "type": "object",
@@ -485,7 +485,12 @@ def test_crash_sigkill_then_read_and_recover(tmp_path, n_written):
     assert cols["p"].tolist() == [k * 0.25 for k in range(n)]
 
     out = tmp_path / "recovered.mcap"
-    assert recover(path, out) == n
+    r = recover(path, out)
+    assert r.messages_written == n and r.messages_unverified == 0 and not r.damaged_chunks
+    assert r.complete_source is False and r.messages_expected is None   # no statistics to count against
+    # the file ends where the last flush left it: at a record boundary (nothing in it lost), or inside
+    # a record cut off by the kill (the messages in it are lost, how many is unknown)
+    assert (r.messages_lost, r.clean) == ((0, True) if not r.skipped_bytes else (None, False))
     assert not (tmp_path / "recovered.mcap.partial").exists()
     with open(out, "rb") as f:
         r = make_reader(f)
@@ -536,7 +541,8 @@ def test_recover_refuses_same_path_and_bad_input(tmp_path):
     junk.write_bytes(b"\x00" * 100)
     with pytest.raises(LogFormatError, match="junk.mcap.*not an MCAP"):
         recover(junk, tmp_path / "out.mcap")
-    assert recover(path, tmp_path / "copy.mcap") == 90  # a finished file copies whole
+    r = recover(path, tmp_path / "copy.mcap")  # a finished file copies whole
+    assert (r.messages_written, r.messages_expected, r.messages_lost, r.clean) == (90, 90, 0, True)
     assert list(read_messages(tmp_path / "copy.mcap")) == list(read_messages(path))
 
 

@@ -20,7 +20,8 @@ from mcap.writer import Writer
 
 from livesweep.errors import LogFormatError
 from livesweep.telemetry.mcap_log import (SKIP_REASONS, McapLogWriter, SkippedMessages, iter_file_order, read_fields,
-                                          read_messages, read_topics_fields, recover)
+                                          read_messages, read_topics_fields)
+from livesweep.telemetry.mcap_recover import recover
 
 T0 = 1_000_000_000
 DT = 10_000_000
@@ -139,7 +140,8 @@ def test_lenient_file_order_skips_non_json_channels(tmp_path):
 # --- damaged chunks ---------------------------------------------------------------------------
 
 def _crc_damaged(tmp_path: Path) -> tuple[Path, int]:
-    """An uncompressed log with one digit changed inside a chunk: still valid JSON, wrong value."""
+    """An uncompressed log with one digit changed inside a chunk (1250.0 -> 1290.0): still valid JSON,
+    wrong value."""
     ok = tmp_path / "ok.mcap"
     with McapLogWriter(ok, compression="none", chunk_size=2048) as w:
         w.add_channel("/a", "A", {"type": "object"})
@@ -147,7 +149,7 @@ def _crc_damaged(tmp_path: Path) -> tuple[Path, int]:
             w.write("/a", {"x": 1000.0 + k}, log_time_ns=T0 + k * DT)
     buf = bytearray(ok.read_bytes())
     at = buf.find(b'"x":1250.0')
-    buf[at + 6] = ord("9")                                      # 1250.0 -> 1950.0
+    buf[at + 6] = ord("9")                                      # 1250.0 -> 1290.0
     bad = tmp_path / "bad.mcap"
     bad.write_bytes(bytes(buf))
     return bad, at
@@ -353,14 +355,20 @@ def test_a_truncated_verification_log_is_noted_too(tmp_path):
     assert len(runner.notes) == 1 and "cut.mcap" in runner.notes[0] and f"{n} messages read" in runner.notes[0]
 
 
-def test_recover_stops_at_a_damaged_chunk_instead_of_laundering_it(tmp_path):
+def test_recover_keeps_a_damaged_chunk_only_flagged_as_unverified(tmp_path):
+    """A chunk failing its CRC is what the mcap reader returns as it is: recover keeps its messages
+    (so it never writes fewer than a reader reads) but counts them as unverified, in its result and
+    in the copy's metadata, and every reader of the copy says so."""
     bad, at = _crc_damaged(tmp_path)
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(bad.read_bytes()[:at + 3000])                # unfinished, damaged chunk inside
     rec = tmp_path / "rec.mcap"
-    n = recover(cut, rec)
+    r = recover(cut, rec)
     xs = read_fields(rec, "/a", ["x"])["x"]
-    assert xs.size == n and np.all(xs < 1250.0) and n < 250      # nothing from the damaged chunk on
+    assert xs.size == r.messages_written and 250 < r.messages_written < 500
+    assert r.messages_unverified > 0 and len(r.unverified_chunks) == 1
+    assert 1250.0 not in xs and np.count_nonzero(xs == 1290.0) == 2   # the damaged value, kept and flagged
     notes: list[str] = []
     read_topics_fields(rec, {"/a": ["x"]}, notes=notes)
-    assert "CRCValidationError" in notes[0] and f"{n} messages kept" in notes[0]
+    assert f"{r.messages_written} messages kept" in notes[0]
+    assert f"{r.messages_unverified} kept from chunks that failed their CRC check" in notes[0]

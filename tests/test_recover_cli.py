@@ -36,6 +36,8 @@ def test_a_killed_recording_after_recover_opens_in_the_mcap_reader(tmp_path, cap
     said = capsys.readouterr().out
     out = tmp_path / "live.recovered.mcap"
     assert "was unfinished" in said and str(out) in said
+    # the file ends at a flush, so at a record boundary: nothing in it was lost or is unverified
+    assert "LOST" not in said and "UNVERIFIED" not in said and "nothing that was in the file was lost" in said
     with open(out, "rb") as f:
         reader = make_reader(f)
         msgs = [(m.log_time, m.data) for _, _, m in reader.iter_messages()]
@@ -50,5 +52,5 @@ def test_a_killed_recording_after_recover_opens_in_the_mcap_reader(tmp_path, cap
     assert "livesweep recover" in capsys.readouterr().err
     # a second recover refuses to overwrite unless forced
     assert cli.main(["recover", str(live)]) == 2
-    assert "exists; give --force" in capsys.readouterr().err
+    assert "exists; it is not overwritten unless asked (--force)" in capsys.readouterr().err
     assert cli.main(["recover", str(live), "--force"]) == 0

@@ -297,9 +297,10 @@ def cmd_recover(args) -> int:
 
     src = Path(args.log)
     out = Path(args.out) if args.out else src.with_name(src.stem + ".recovered.mcap")
-    if out.exists() and not args.force:
-        raise ConfigError(f"--out {str(out)!r} exists; give --force to replace it")
-    r = recover(src, out)
+    from livesweep.locks import check_file_free
+
+    check_file_free(out, overwrite=args.force)
+    r = recover(src, out, overwrite=args.force)
     state = ("was finished" if r.complete_source
              else "was unfinished (no readable footer: its writer stopped before closing it, or its end is damaged)")
     of = f" of the {r.messages_expected} it holds" if r.messages_expected is not None else ""
@@ -790,10 +791,12 @@ def build_parser() -> argparse.ArgumentParser:
     nc.add_argument("--force", action="store_true", help="replace an existing --out")
     nc.set_defaults(func=cmd_new_case)
 
-    rc = sub.add_parser("recover", help="finish a recording whose process was killed, so any MCAP reader opens it",
-                        description="Copy every complete record of an unfinished MCAP recording (no footer: its "
-                                    "process was killed) into a finished file. Example: livesweep recover live.mcap")
-    rc.add_argument("log", help="the unfinished MCAP file")
+    rc = sub.add_parser("recover", help="a finished copy of a killed or damaged recording, saying what was lost",
+                        description="Copy every readable record of an unfinished or damaged MCAP recording (a killed "
+                                    "process, flipped bits) into a finished file: damaged chunks are stepped over, "
+                                    "what was lost or kept unverified is counted and printed, and the exit status is "
+                                    "1 when anything was. Example: livesweep recover live.mcap")
+    rc.add_argument("log", help="the unfinished or damaged MCAP file")
     rc.add_argument("--out", help="finished copy to write (default: LOG with .recovered.mcap)")
     rc.add_argument("--force", action="store_true", help="replace an existing --out")
     rc.set_defaults(func=cmd_recover)

@@ -24,14 +24,15 @@ Writing
   writes ``path`` directly and calls ``file.flush()`` every ``flush_every`` messages, so a
   killed process loses at most the open chunk (``chunk_size`` bytes, uncompressed) plus the
   messages since the last flush. Such an unfinished file can be read by the readers below
-  (``LogSummary.complete`` is False) and turned into a finished file by :func:`recover`. A live
+  (``LogSummary.complete`` is False) and turned into a finished file by
+  :func:`livesweep.telemetry.mcap_recover.recover`. A live
   recording is never deleted: :meth:`McapLogWriter.abort`, an exception, or a failure while
   finishing (a full disk) leave it unfinished on disk.
 
 Reading
 -------
-:func:`read_messages`, :func:`read_summary`, :func:`read_metadata`, :func:`read_attachments`,
-:func:`read_fields` and :func:`recover` accept any MCAP file with JSON channels, not only files
+:func:`read_messages`, :func:`read_summary`, :func:`read_metadata`, :func:`read_attachments` and
+:func:`read_fields` accept any MCAP file with JSON channels, not only files
 written here. A finished file is read through its summary and indexes
 (:func:`mcap.reader.make_reader`); an unfinished file (no footer: the writer was killed before
 ``finish()``), on which ``make_reader`` fails, is read by streaming every record up to the
@@ -88,7 +89,6 @@ __all__ = [
     "iter_file_order",
     "SkippedMessages",
     "SKIP_REASONS",
-    "recover",
     "get_field",
 ]
 
@@ -313,14 +313,23 @@ class McapLogWriter:
         self._overwrite = bool(overwrite)
         if atomic:
             check_file_free(self._path, overwrite=overwrite, what="MCAP log", error=LogFormatError)
-        self._file: BinaryIO | None = _open_locked(self._file_path, exclusive=not overwrite and not atomic,
-                                                   where=where)
-        self._writer = Writer(
-            self._file,
-            chunk_size=chunk_size,
-            compression=_COMPRESSION[compression],
-        )
-        self._writer.start(profile="", library=library)
+        self._file: BinaryIO | None = None
+        try:
+            self._file = _open_locked(self._file_path, exclusive=not overwrite and not atomic, where=where)
+            self._writer = Writer(
+                self._file,
+                chunk_size=chunk_size,
+                compression=_COMPRESSION[compression],
+            )
+            self._writer.start(profile="", library=library)
+        except LogFormatError:             # refused before anything was made (it exists, another writer has it)
+            raise
+        except BaseException:              # a signal or an I/O error half-way: leave no partial file behind
+            if self._file is not None:
+                self._file.close()
+            if atomic:
+                self._file_path.unlink(missing_ok=True)
+            raise
         self._fast = _FastMessages.of(self._writer, chunk_size)
         self._state = "open"  # "open" | "closed" | "aborted"
         self._schemas: dict[tuple[str, bytes], int] = {}
@@ -1532,9 +1541,11 @@ def _condition_notes(src: _Source) -> list[str]:
                      f"its torn end ({stopped}): {len(src.scan.messages)} messages read")
     rec = _read_metadata(src).get("livesweep.recover")
     if rec is not None:
-        notes.append(f"log {src.path} was recovered from the unfinished log {rec.get('source', '?')} "
-                     f"(livesweep recover: {rec.get('messages_recovered', '?')} messages kept, reading stopped at "
-                     f"{rec.get('stopped_at', '?')}); data after the truncation is missing")
+        lost, unverified = rec.get("messages_lost", "?"), rec.get("messages_unverified", "0")
+        notes.append(f"log {src.path} was recovered from {rec.get('source', '?')} (livesweep recover: "
+                     f"{rec.get('messages_recovered', '?')} messages kept, {lost} lost"
+                     + (f", {unverified} kept from chunks that failed their CRC check" if unverified not in ("0", 0) else "")
+                     + ")")
     return notes
 
 
@@ -1561,7 +1572,7 @@ def read_topics_fields(
     notes : list of str, optional
         Receives one line per condition of the log a report should mention: unfinished (no
         footer, read up to its torn end; with the number of messages read) or recovered by
-        :func:`recover` (with the number of messages it kept).
+        :func:`livesweep.telemetry.mcap_recover.recover` (with the number of messages it kept).
 
     Returns
     -------
@@ -1600,98 +1611,3 @@ def read_topics_fields(
         notes.extend(_condition_notes(src))
     return result
 
-
-def recover(path: str | os.PathLike[str], out_path: str | os.PathLike[str]) -> int:
-    """Copy every complete record of an unfinished log into a new, finished log.
-
-    Schemas, channels, messages (bytes, times and sequence numbers unchanged), metadata and
-    attachments that were fully written before the truncation are copied in file order; the
-    header's profile and library are kept. A metadata record ``"livesweep.recover"`` notes the
-    source file, the number of messages and where reading stopped. The output is written to
-    ``<out_path>.partial`` and renamed, so it is finished or absent. Works on finished files too
-    (then it is a plain copy plus that record). A chunk that fails its CRC check ends the copy
-    there, as a torn tail does (``stopped_at`` names it): damaged messages are never rewritten
-    into a file with fresh, valid CRCs.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        The unfinished (or finished) MCAP file.
-    out_path : str or os.PathLike
-        Where to write the finished copy; must differ from ``path``.
-
-    Returns
-    -------
-    int
-        Number of messages recovered.
-    """
-    src_p = Path(path)
-    out_p = Path(out_path)
-    _check_file(src_p)  # existence / magic checks with clear errors (no scan: damage ends the copy below)
-    if out_p.exists() and src_p.exists() and out_p.resolve() == src_p.resolve():
-        raise LogFormatError(f"recover: output {out_p} is the input file; choose another path")
-    tmp = out_p.with_name(out_p.name + ".partial")
-    try:
-        fo = open(tmp, "wb")  # noqa: SIM115
-    except OSError as e:
-        raise LogFormatError(f"cannot write recovered MCAP log {out_p}: {e.strerror or e}") from e
-    n = 0
-    stopped = "end of file"
-    try:
-        w = Writer(fo, chunk_size=256 * 1024, compression=CompressionType.ZSTD)
-        started = False
-        schema_map: dict[int, int] = {}
-        chan_map: dict[int, int] = {}
-        # Replay in file order so metadata and attachments keep their place among the messages;
-        # a schema and a channel always precede the channel's first message in the source.
-        with open(src_p, "rb") as f:
-            try:
-                for rec in StreamReader(f, skip_magic=False, validate_crcs=True).records:
-                    if isinstance(rec, Header):
-                        if not started:
-                            w.start(profile=rec.profile, library=rec.library)
-                            started = True
-                        continue
-                    if not started:  # no header record: should not happen after the magic check
-                        w.start(profile="", library="livesweep")
-                        started = True
-                    if isinstance(rec, Schema):
-                        if rec.id not in schema_map:
-                            schema_map[rec.id] = w.register_schema(rec.name, rec.encoding, rec.data)
-                    elif isinstance(rec, Channel):
-                        if rec.id not in chan_map:
-                            chan_map[rec.id] = w.register_channel(
-                                rec.topic, rec.message_encoding, schema_map.get(rec.schema_id, 0),
-                                dict(rec.metadata),
-                            )
-                    elif isinstance(rec, Message):
-                        if rec.channel_id in chan_map:
-                            w.add_message(chan_map[rec.channel_id], rec.log_time, rec.data,
-                                          rec.publish_time, rec.sequence)
-                            n += 1
-                    elif isinstance(rec, Metadata):
-                        w.add_metadata(rec.name, dict(rec.metadata))
-                    elif isinstance(rec, Attachment):
-                        w.add_attachment(rec.create_time, rec.log_time, rec.name, rec.media_type,
-                                         bytes(rec.data))
-            except Exception as e:  # noqa: BLE001 - the truncated tail (EndOfFile, torn frame, ...)
-                stopped = type(e).__name__ + (f": {e}" if str(e) else "")
-        if not started:
-            w.start(profile="", library="livesweep")
-        w.add_metadata("livesweep.recover", {
-            "source": str(src_p),
-            "messages_recovered": str(n),
-            "stopped_at": stopped,
-        })
-        w.finish()
-        fo.flush()
-        os.fsync(fo.fileno())
-        fo.close()
-        os.replace(tmp, out_p)
-    except BaseException as e:
-        fo.close()
-        tmp.unlink(missing_ok=True)
-        if isinstance(e, OSError):
-            raise LogFormatError(f"cannot write recovered MCAP log {out_p}: {e}") from e
-        raise
-    return n
