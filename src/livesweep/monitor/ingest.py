@@ -104,6 +104,10 @@ class FrameQueue:
         return self._n
 
 
+#: At the stop, a source without a drain request is read until it has been quiet this long [s].
+_DRAIN_QUIET_S = 0.5
+
+
 class Ingest(threading.Thread):
     """Reads the sources, records every frame, hands the wanted ones to a :class:`FrameQueue`.
 
@@ -220,13 +224,17 @@ class Ingest(threading.Thread):
             ask = getattr(src, "request_drain", None)
             if ask is not None:
                 ask()
+            quiet_since = time.monotonic()
             while time.monotonic() < deadline:
-                frames = src.poll(timeout_s=0.05 if ask is not None else 0)
+                frames = src.poll(timeout_s=0.05)
                 if frames:
                     self.drained += len(frames)
                     self._take(frames, getattr(src, "recorded", False))
-                elif ask is None or src.drained:
+                    quiet_since = time.monotonic()
+                elif ask is not None and src.drained:
                     break
+                elif ask is None and time.monotonic() - quiet_since >= _DRAIN_QUIET_S:
+                    break                    # what the link still had in flight has arrived
             waiting = getattr(src, "waiting", None)
             if waiting is not None:
                 self.not_taken_at_stop += int(waiting)
