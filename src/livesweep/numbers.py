@@ -141,6 +141,7 @@ def points(fraction: float, threshold: float) -> str:
     """How far a fraction is from its threshold in percentage points, signed: ``"+21 points"``,
     with one decimal within half a point of it (``"-0.2 points"``), ``"0 points"`` on it."""
     d = 100.0 * (float(fraction) - float(threshold))
-    if abs(d) < 0.05:
-        return "0 points"
-    return f"{d:+.0f} points" if abs(d) >= 0.5 else f"{d:+.1f} points"
+    for text in (f"{d:+.0f}", f"{d:+.1f}"):         # whole points, else a tenth; never a signed zero
+        if text.lstrip("+-").strip("0.") != "":
+            return f"{text} points"
+    return "0 points"
