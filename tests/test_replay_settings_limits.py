@@ -50,6 +50,8 @@ def test_the_saved_settings_of_a_real_monitor_come_back_unchanged():
 @pytest.mark.parametrize("d, words", [
     (_saved(sample_rate_hz=1e9), ["sample_rate_hz:", "1000000000.0", f"{limits.MAX_SAMPLE_RATE_HZ:g}"]),
     (_saved(sample_rate_hz=1e6), ["sample_rate_hz:", "1000000.0"]),
+    (_saved(sample_rate_hz=1e5, band_rad_s=[1.0, 20.0]), ["sample_rate_hz:", "100000.0",
+                                                          f"{limits.MAX_MONITOR_RATE_HZ:g} Hz"]),
     (_saved(sample_rate_hz=float("nan")), ["sample_rate_hz:", "nan"]),
     (_saved(update_period_s=1e-9), ["update_period_s:", "1e-09", f"{limits.MIN_UPDATE_PERIOD_S:g} s"]),
     (_saved(update_period_s="fast"), ["update_period_s", "'fast'"]),

@@ -20,7 +20,8 @@ Budget
 * Models: a transfer-function numerator or denominator is of order at most :data:`MAX_TF_ORDER`;
   a state-space model has at most :data:`MAX_MODEL_DIMENSION` states, inputs and outputs.
 * The live monitor (``monitor``, ``replay``; its settings from a map, a case, the command line or
-  a recording): at most :data:`MAX_MONITOR_PAIRS` pairs, an estimate at most every
+  a recording): at most :data:`MAX_MONITOR_PAIRS` pairs, a grid of at most
+  :data:`MAX_MONITOR_RATE_HZ`, an estimate at most every
   :data:`MIN_UPDATE_PERIOD_S`, a sliding window of at most :data:`MAX_WINDOW_S` holding at most
   :data:`MAX_RECORD_VALUES` samples x signals, and its segment transforms at most
   :data:`MAX_SPECTRAL_VALUES` values.
@@ -37,7 +38,7 @@ __all__ = [
     "MAX_CONFIG_BYTES", "MAX_SAMPLE_RATE_HZ", "MAX_N_FREQ", "MAX_WINDOWS", "MAX_WINDOW_S",
     "MAX_RECORD_VALUES", "MAX_SPECTRAL_VALUES", "MAX_NAME_CHARS", "MAX_MODEL_DIMENSION",
     "MAX_EXPRESSION_CHARS", "MAX_EXPRESSION_TOKENS", "MAX_EXPRESSION_DEPTH", "MAX_TF_ORDER",
-    "MIN_UPDATE_PERIOD_S", "MAX_MONITOR_PAIRS", "window_spectra_values",
+    "MIN_UPDATE_PERIOD_S", "MAX_MONITOR_PAIRS", "MAX_MONITOR_RATE_HZ", "window_spectra_values",
 ]
 
 #: Largest case file or channel map [bytes] (real ones are a few kB).
@@ -69,6 +70,9 @@ MIN_UPDATE_PERIOD_S = 0.05
 #: Most input/output pairs the live monitor analyses (the presets: 9 to 15; each pair costs about
 #: 0.1 ms of a core per estimate).
 MAX_MONITOR_PAIRS = 200
+#: Highest grid rate of the live monitor [Hz]: telemetry streams reach a few hundred Hz (a 400 Hz
+#: DataFlash IMU streamed whole); at 100 kHz, replaying 80 s of data took 252 s and 2.8 GB.
+MAX_MONITOR_RATE_HZ = 2_000.0
 #: Highest order (degree in s) of a transfer-function numerator or denominator (real ones are 0 to 6;
 #: at a few hundred the fit's float64 polynomial coefficients overflow and its cost is undefined).
 MAX_TF_ORDER = 20

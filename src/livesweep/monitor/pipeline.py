@@ -232,7 +232,8 @@ class MonitorSettings:
         the live monitor: a window of at most ``MAX_WINDOW_S`` [s] holding at most
         ``MAX_RECORD_VALUES`` samples x signals, with segment transforms of at most
         ``MAX_SPECTRAL_VALUES`` values; a segment [s] no longer than the window; an update period of
-        at least ``MIN_UPDATE_PERIOD_S`` [s]; at most ``MAX_MONITOR_PAIRS`` pairs.
+        at least ``MIN_UPDATE_PERIOD_S`` [s]; a grid of at most ``MAX_MONITOR_RATE_HZ`` [Hz]; at most
+        ``MAX_MONITOR_PAIRS`` pairs.
 
         Parameters
         ----------
@@ -265,12 +266,15 @@ class MonitorSettings:
         period = self.update_period_s
         if not (isinstance(period, (int, float)) and math.isfinite(period) and period >= limits.MIN_UPDATE_PERIOD_S):
             raise error("update_period_s", f"must be at least {limits.MIN_UPDATE_PERIOD_S:g} s", period)
+        fs = self.sample_rate_hz
+        if not (isinstance(fs, (int, float)) and math.isfinite(fs) and 0 < fs <= limits.MAX_MONITOR_RATE_HZ):
+            raise error("sample_rate_hz", f"the live monitor's grid runs at most at {limits.MAX_MONITOR_RATE_HZ:g} Hz",
+                        fs)
         pairs = len(self.inputs) * len(self.outputs)
         if pairs > limits.MAX_MONITOR_PAIRS:
             raise error("outputs", f"{len(self.outputs)} outputs x {len(self.inputs)} inputs = {pairs} pairs; the "
                         f"monitor analyses at most {limits.MAX_MONITOR_PAIRS}", len(self.outputs))
         n_signals = len(set((*self.inputs, *self.outputs, *(self.references or ()))))
-        fs = self.sample_rate_hz
         samples = int(round(window * fs))
         if samples * n_signals > limits.MAX_RECORD_VALUES:
             raise error("window_s", f"{window:g} s x {fs:g} Hz x {n_signals} signals = {samples * n_signals} samples "
