@@ -16,7 +16,10 @@ from livesweep.telemetry.clock import StampCheck
 from livesweep.telemetry.mavlink_in import MavlinkDecoder, TlogSource
 from test_monitor_hardening import Vehicle
 
-TLOGS = Path(__file__).resolve().parents[2] / "shared" / "data" / "mavlink_tlog"
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+if not DATA.is_dir():
+    DATA = Path("/work/shared/data")
+TLOGS = DATA / "mavlink_tlog"
 
 
 @pytest.mark.parametrize("name", ["uavlogviewer_autotest_flight_logs.tlog", "uavlogviewer_vtol_sitl.tlog"])
