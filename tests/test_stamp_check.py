@@ -98,3 +98,35 @@ def test_stamps_ahead_of_every_epoch_start_a_new_one_only_when_they_agree():
     assert not c.check(far + 10**7, rx + 3 * 10**7)
     assert not c.check(far + 2 * 10**7, rx + 4 * 10**7)    # the third that agrees starts the epoch ...
     assert c.check(far + 3 * 10**7, rx + 5 * 10**7)        # ... so the stream's clock moved on
+
+
+def test_signed_frames_refused_on_the_way_are_no_sequence_gap_but_a_lost_frame_is():
+    """A signed stream where some genuine frames are refused (their signing time stamp is not newer:
+    a replay) and one frame never arrives: the refused ones arrived, so only the missing one is a
+    gap of the 8-bit sequence."""
+    import hashlib
+
+    key = hashlib.sha256(b"livesweep seq key").digest()
+    veh = Vehicle(1, key)
+    dec = MavlinkDecoder(key, False, live=True)
+    frames = []
+    rx = 1_800_000_000 * 10**9
+    rec = {"sysid": 1, "compid": 1, **_uptime_stream(0.1)[1][2]}          # a HIGHRES_IMU
+    refused = lost = 0
+    for k in range(200):
+        rec = {**rec, "time_usec": rec["time_usec"] + 10_000}
+        if k % 20 == 10:                                                     # its stamp is not newer: a replay
+            saved = veh.mav.signing.timestamp
+            veh.mav.signing.timestamp = saved - 1_000
+            d = veh.pack("HIGHRES_IMU", rec)
+            veh.mav.signing.timestamp = saved + 1
+            refused += 1
+        else:
+            d = veh.pack("HIGHRES_IMU", rec)
+        if k == 155:
+            lost += 1                                                        # never arrives
+            continue
+        dec.datagram(d, rx + k * 10**7, frames)
+    assert dec.counts["replayed_signature"] == refused == 10
+    assert len(frames) == 200 - refused - lost
+    assert dec.counts["seq_gaps"] == {"1/1": 1}

@@ -27,7 +27,8 @@ Nothing is dropped silently: every byte that does not become a frame is counted 
     replayed_signature     the part of ``bad_signature`` with a correct signature (replays)
     bad_other              other BAD_DATA (bad incompat flags, undecodable payload)
     unknown_message        frames with a message id the dialect does not know
-    seq_gaps               {"sysid/compid": estimated lost frames}, from the 8-bit ``seq``
+    seq_gaps               {"sysid/compid": estimated lost frames}, from the 8-bit ``seq`` (signed
+                           frames refused in between arrived: they are not counted as lost)
     seq_repeats            frames that repeat the previous ``seq`` of their source
     clock_unrepresentable  frames whose time stamp does not fit an MCAP time (uint64 ns): recorded
                            with their receive time as publish time
@@ -173,6 +174,9 @@ class MavlinkDecoder:
         self.counts = _empty_counts()
         self._key = signing_key
         self._last_seq: dict[tuple[int, int], int] = {}
+        #: (sysid, compid) -> signed frames refused since that source's last good one: they arrived,
+        #: so the sequence numbers they used are no loss
+        self._refused_arrivals: dict[tuple[int, int], int] = {}
         self._allow_unsigned = bool(allow_unsigned)
         self._warned: set[str] = set()
         self._stamp_clocks: dict[tuple[int, int, str], StampCheck] = {}
@@ -202,9 +206,11 @@ class MavlinkDecoder:
         key = self._key
         assert key is not None
         expected = hashlib.sha256(key + bytes(msgbuf[:-6])).digest()[:6]
+        arrived = self._refused_arrivals
         if not hmac.compare_digest(expected, bytes(msgbuf[-6:])):
             self._refuse_signed("bad_signature", "signed MAVLink frame with a wrong signature refused "
                                 "(forged, or signed with another key)")
+            arrived[(src_system, src_component)] = arrived.get((src_system, src_component), 0) + 1
             return False
         stamp = int.from_bytes(bytes(msgbuf[-12:-6]), "little")
         stream = (msgbuf[-13], src_system, src_component)
@@ -213,6 +219,7 @@ class MavlinkDecoder:
             self.counts["replayed_signature"] += 1
             self._refuse_signed("bad_signature", "signed MAVLink frame refused: its signing time stamp is not newer "
                                 "than its stream's (a replay)")
+            arrived[(src_system, src_component)] = arrived.get((src_system, src_component), 0) + 1
             return False
         self._sign_streams[stream] = stamp
         self._sign_time = max(self._sign_time, stamp)
@@ -330,11 +337,13 @@ class MavlinkDecoder:
         key = (sysid, compid)
         seq = msg.get_seq()
         last = self._last_seq.get(key)
+        refused = self._refused_arrivals.pop(key, 0) if self._refused_arrivals else 0
         if last is not None:
             gap = (seq - last - 1) & 0xFF
             if gap == 255:
                 c["seq_repeats"] += 1
-            elif gap:
+            elif gap > refused:
+                gap -= refused
                 k = f"{sysid}/{compid}"
                 c["seq_gaps"][k] = c["seq_gaps"].get(k, 0) + gap
         self._last_seq[key] = seq
