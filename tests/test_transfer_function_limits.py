@@ -17,28 +17,9 @@ from livesweep.limits import MAX_TF_ORDER
 from livesweep.pipeline.identify import parse_case_specs
 from livesweep.report.html import _transfer_functions
 from livesweep.report.summary import stage_summary
+from test_case_limits import CASE as BASE_CASE
 
-CASE = """\
-[case]
-name = "t"
-
-[[identify]]
-log = "a.mcap"
-
-[signals.u]
-topic = "/x/u"
-field = "val"
-
-[signals.y]
-topic = "/x/y"
-field = "val"
-
-[spectral]
-inputs = ["u"]
-outputs = ["y"]
-band_rad_s = [0.5, 10.0]
-sample_rate_hz = 50.0
-
+CASE = BASE_CASE + """
 [transfer_functions.y_u]
 output = "y"
 input = "u"

@@ -831,14 +831,19 @@ def read_channel_map(path: str | os.PathLike[str], *, one_clock: bool = True) ->
     _check_keys(ctx, data, tuple(dict.fromkeys(MAP_KEYS + CASE_KEYS)), "")
     if "signals" not in data:
         raise ctx.error("signals", "missing: a channel map needs a [signals] table")
+    return _channel_map(ctx, data, ctx.path, one_clock=one_clock)
+
+
+def _channel_map(ctx: _Ctx, data: Mapping[str, Any], path: Path, *, one_clock: bool) -> ChannelMap:
+    """The :class:`ChannelMap` of checked top-level tables (``signals`` present)."""
     head = _parse_map_table(ctx, data["map"]) if "map" in data else {}
     signals = _parse_signals(ctx, data["signals"])
     if one_clock:
         _one_clock(ctx, signals)
     spectral = _parse_spectral(ctx, data["spectral"], signals) if "spectral" in data else None
     test_points = _parse_test_points(ctx, data["test_points"], spectral) if "test_points" in data else None
-    return ChannelMap(name=head.get("name", ctx.path.stem), description=head.get("description", ""),
-                      needs=head.get("needs", ""), path=ctx.path, signals=signals, spectral=spectral,
+    return ChannelMap(name=head.get("name", path.stem), description=head.get("description", ""),
+                      needs=head.get("needs", ""), path=path, signals=signals, spectral=spectral,
                       test_points=test_points, vehicle=head.get("vehicle", {}), system=head.get("system"))
 
 
@@ -875,10 +880,4 @@ def channel_map_from_tables(tables: Mapping[str, Any], path: str | os.PathLike[s
     _check_keys(ctx, data, MAP_KEYS, "")
     if "signals" not in data:
         raise ctx.error("signals", "missing: monitor settings need a signals table")
-    head = _parse_map_table(ctx, data["map"]) if "map" in data else {}
-    signals = _parse_signals(ctx, data["signals"])
-    spectral = _parse_spectral(ctx, data["spectral"], signals) if "spectral" in data else None
-    test_points = _parse_test_points(ctx, data["test_points"], spectral) if "test_points" in data else None
-    return ChannelMap(name=head.get("name", p.stem), description=head.get("description", ""),
-                      needs=head.get("needs", ""), path=p, signals=signals, spectral=spectral,
-                      test_points=test_points, vehicle=head.get("vehicle", {}), system=head.get("system"))
+    return _channel_map(ctx, data, p, one_clock=False)

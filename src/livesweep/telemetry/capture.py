@@ -132,12 +132,7 @@ def open_udp(host: str, port: int, rcvbuf_bytes: int = RCVBUF_BYTES) -> tuple[so
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
     sock = socket.socket(family, socket.SOCK_DGRAM)
     try:
-        for opt in (_SO_RCVBUFFORCE, socket.SO_RCVBUF):
-            try:
-                sock.setsockopt(socket.SOL_SOCKET, opt, rcvbuf_bytes)
-                break
-            except OSError:
-                continue
+        _set_rcvbuf(sock, 2 * rcvbuf_bytes)
         if KERNEL_DROPS_KNOWN:
             try:
                 sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
@@ -760,14 +755,20 @@ class _Recorder:
     def drain(self) -> None:
         """What the monitor asked at its stop: read the sockets until empty, decode, forward, say
         ``drained`` with the counts (bounded by ``_DRAIN_S``)."""
+        self.read_and_decode()
+        self.refresh_drops()
+        self.send_out(("drained", self.status()), event=True)
+
+    def read_and_decode(self) -> None:
+        """Read the sockets until empty (at most ``_DRAIN_S``), hand the analysis its share, then
+        decode the backlog (at most ``_DRAIN_S`` more)."""
         deadline = time.monotonic() + _DRAIN_S
         while time.monotonic() < deadline and sum(self.read(k) for k in range(len(self.socks))):
             pass
         self.flush_forward()
+        deadline = time.monotonic() + _DRAIN_S
         while self.backlog and time.monotonic() < deadline:
             self.decode(2_000)
-        self.refresh_drops()
-        self.send_out(("drained", self.status()), event=True)
 
     def periodic(self, now: float) -> None:
         if now - self.last_status >= _STATUS_EVERY_S:
@@ -811,13 +812,7 @@ class _Recorder:
 
     def finish(self) -> None:
         """Read what the sockets still hold, decode everything, finish the file, say so."""
-        deadline = time.monotonic() + _DRAIN_S
-        while time.monotonic() < deadline:
-            if not sum(self.read(k) for k in range(len(self.socks))):
-                break
-        self.flush_forward()
-        while self.backlog and time.monotonic() < deadline + _DRAIN_S:
-            self.decode(2_000)
+        self.read_and_decode()
         # beyond that the stop would wait on decoding: the rest is in the file as received
         # (/link/mavlink), not decoded to /mavlink/*, and counted
         self.undecoded_at_stop = len(self.backlog)
