@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from livesweep.report.chart import bode_chart, residual_chart, time_history_chart
-from livesweep.report.svg import angle_ticks, linear_ticks, log_ticks, to_svg
+from livesweep.report.svg import TICK_FONT, angle_ticks, linear_ticks, log_ticks, to_svg
 from livesweep.spectral.response import FrequencyResponse
 
 NS = "{http://www.w3.org/2000/svg}"
@@ -41,7 +41,7 @@ def _y_map(root, frame):
     ticks = [(py, v) for py, v in ticks if v is not None]
     assert len(ticks) >= 3
     py, v = np.array(ticks).T
-    a, b = np.polyfit(py - 8.5 * 0.35, v, 1)          # labels sit 0.35 font size below their line
+    a, b = np.polyfit(py - TICK_FONT * 0.35, v, 1)    # labels sit 0.35 font size below their line
     return lambda q: a * np.asarray(q) + b
 
 
@@ -49,7 +49,7 @@ def _x_map_log(root, frame):
     """Frequency of an SVG x, from the x tick labels under ``frame`` (log axis)."""
     x, y, w, h = frame
     ticks = [(float(t.get("x")), _numbers(t.text)) for t in root.iter(NS + "text")
-             if t.get("text-anchor") == "middle" and t.get("y") and y + h < float(t.get("y")) < y + h + 15]
+             if t.get("text-anchor") == "middle" and t.get("y") and y + h < float(t.get("y")) < y + h + TICK_FONT + 6]
     ticks = [(px, v) for px, v in ticks if v is not None and v > 0]
     assert len(ticks) >= 2
     px, v = np.array(ticks).T

@@ -39,13 +39,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import math
+
 import numpy as np
 
 from livesweep.numbers import finite_or_none
 from livesweep.numbers import frozen_array as _frozen
 
 __all__ = ["Accuracy", "accuracy_from_jacobian", "MONTE_CARLO_SCATTER_OVER_CR", "MAX_CRAMER_RAO_PCT",
-           "parameter_report", "guideline_failures", "MAX_INSENSITIVITY_PCT", "MAX_CORRELATION", "MAX_COST", "MAX_COST_AVERAGE"]
+           "parameter_report", "guideline_failures", "pct_text", "NOT_DETERMINED_PCT", "MAX_INSENSITIVITY_PCT",
+           "MAX_CORRELATION", "MAX_COST", "MAX_COST_AVERAGE"]
 
 #: Observed scatter (std) of Monte-Carlo estimates divided by the mean raw Cramer-Rao bound, median
 #: over parameters (module docstring; XV-15 cruise simulator, 80 realisations).
@@ -55,6 +58,9 @@ MONTE_CARLO_SCATTER_OVER_CR = 0.68
 MAX_CRAMER_RAO_PCT = 20.0
 MAX_INSENSITIVITY_PCT = 10.0
 MAX_CORRELATION = 0.9
+#: A bound beyond this many % of the value says the data do not determine the parameter (it sits
+#: at a bound, or the responses carry nothing of it); it is shown as "not determined", not as a number.
+NOT_DETERMINED_PCT = 1000.0
 #: Cost guidelines (docs/method.md §7.2, §8.2): J <= 100 for one pair, J_ave <= 100 over the pairs of
 #: a state-space fit; above them the model does not describe the data well enough to use.
 MAX_COST = 100.0
@@ -164,6 +170,14 @@ def parameter_report(fit, names) -> list[dict]:
     return out
 
 
+def pct_text(pct, spec: str = ".3g") -> str:
+    """A Cramer-Rao bound or insensitivity [% of the value] for display: ``"12.3"``, or
+    ``"not determined"`` when it is not finite or beyond :data:`NOT_DETERMINED_PCT`."""
+    if pct is None or not math.isfinite(pct) or pct > NOT_DETERMINED_PCT:
+        return "not determined"
+    return format(pct, spec)
+
+
 def guideline_failures(params) -> list[str]:
     """The accuracy guidelines (CR% <= 20, I% <= 10) each free parameter of ``params``
     (:func:`parameter_report` entries) fails, as reasons ("Nr CR% 31.2 > 20")."""
@@ -171,8 +185,11 @@ def guideline_failures(params) -> list[str]:
     for p in params:
         if p.get("fixed"):
             continue
-        if p["cramer_rao_pct"] is None or p["cramer_rao_pct"] > MAX_CRAMER_RAO_PCT:
-            out.append(f"{p['name']} CR% {p['cramer_rao_pct']} > {MAX_CRAMER_RAO_PCT:g}")
+        if pct_text(p["cramer_rao_pct"]) == "not determined":
+            out.append(f"{p['name']} not determined by the data (CR beyond {NOT_DETERMINED_PCT:g} %)")
+            continue
+        if p["cramer_rao_pct"] > MAX_CRAMER_RAO_PCT:
+            out.append(f"{p['name']} CR% {pct_text(p['cramer_rao_pct'])} > {MAX_CRAMER_RAO_PCT:g}")
         if p["insensitivity_pct"] is None or p["insensitivity_pct"] > MAX_INSENSITIVITY_PCT:
-            out.append(f"{p['name']} I% {p['insensitivity_pct']} > {MAX_INSENSITIVITY_PCT:g}")
+            out.append(f"{p['name']} I% {pct_text(p['insensitivity_pct'])} > {MAX_INSENSITIVITY_PCT:g}")
     return out

@@ -46,7 +46,7 @@ from livesweep.effects import EFFECT_KINDS, SEARCHED_KINDS, Candidate
 from livesweep.effects.table import normalised, restart_from
 from livesweep.errors import ConfigError
 from livesweep.ident.accuracy import (MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT, guideline_failures,
-                                      parameter_report)
+                                      parameter_report, pct_text)
 from livesweep.ident.coupling import find_coupling, no_path_pairs
 from livesweep.ident.residual_space import (PairResidual, ResidualSpace, band_of, pair_residuals,
                                             whitened_ss)
@@ -558,7 +558,8 @@ def effect_text(effect: dict) -> str:
     def par(p):
         if p.get("fixed"):
             return f"{p['name']} = {p['value']:.4g} (fixed: poorly determined)"
-        return f"{p['name']} = {p['value']:.4g} (CR {p['cramer_rao_pct']} %)"
+        cr = pct_text(p["cramer_rao_pct"], ".4g")
+        return f"{p['name']} = {p['value']:.4g} (CR {cr}{'' if cr == 'not determined' else ' %'})"
     text = f"{effect['kind']} at {effect['where']}: " + ", ".join(par(p) for p in effect["parameters"])
     for w in effect.get("with", ()):
         text += f"; together with {w['kind']} at {w['where']}: " + ", ".join(par(p) for p in w["parameters"])
@@ -1012,7 +1013,7 @@ def _try(table, cand, fit, judge, ss_before, ver_before):
             refit = refit_state_space(new_fit.model.with_values(new_fit.theta, fixed={worst["name"]: worst["value"]}), pairs)
         except (ConfigError, np.linalg.LinAlgError, ValueError):
             break
-        why = (f"CR% {worst['cramer_rao_pct']}, I% {worst['insensitivity_pct']}: poorly determined, "
+        why = (f"CR% {pct_text(worst['cramer_rao_pct'])}, I% {pct_text(worst['insensitivity_pct'])}: poorly determined, "
                f"fixed at its fitted value")
         rec["fixed"].append({"name": worst["name"], "value": float(worst["value"]),
                              "cramer_rao_pct": worst["cramer_rao_pct"], "insensitivity_pct": worst["insensitivity_pct"],

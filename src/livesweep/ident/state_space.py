@@ -40,7 +40,7 @@ from livesweep.limits import MAX_MODEL_DIMENSION
 from livesweep.numbers import finite_or_none as _num, frozen_array as _frozen
 
 __all__ = ["StateSpaceModel", "FittedParameter", "StateSpaceFit", "select_pairs", "a_priori_eliminations",
-           "fit_state_space", "refit_state_space", "REFIT_NFEV", "reduce_structure", "equation_error_start",
+           "fit_state_space", "refit_state_space", "evaluate_state_space", "REFIT_NFEV", "reduce_structure", "equation_error_start",
            "MAX_DELTA_COST"]
 
 #: A deletion is kept when the average cost rises by no more than this (docs/method.md §8.5).
@@ -1051,6 +1051,31 @@ def fit_state_space(model: StateSpaceModel, pairs, *, theta0=None, max_nfev: int
 #: Cost evaluations of a refit (the residual loop's, the coupling search's) before it is
 #: continued once (:func:`refit_state_space`).
 REFIT_NFEV = 100
+
+
+def evaluate_state_space(fit: StateSpaceFit, pairs) -> StateSpaceFit:
+    """The fit ``fit`` judged on other frequency points, its parameters unchanged.
+
+    J, the Cramer-Rao bounds and the insensitivities of :func:`fit_state_space` are computed at
+    ``fit.theta`` on ``pairs``, so models fitted on different points (the residual loop's denser
+    grid) are compared on one set (the state-space stage's :data:`~livesweep.ident.cost.N_OMEGA`
+    points per pair). Convergence, message, structure-reduction log and skipped pairs are
+    ``fit``'s.
+
+    Parameters
+    ----------
+    fit : StateSpaceFit
+    pairs : list of PairData
+        From :func:`select_pairs` on ``fit.model``.
+
+    Returns
+    -------
+    StateSpaceFit
+        Same model and ``theta``; cost, bounds and bands of ``pairs``.
+    """
+    problem = _Problem(fit.model, pairs)
+    return _result(fit.model, problem, np.array(fit.theta, float), fit.converged, fit.message, fit.n_iterations,
+                   fit.removed, fit.skipped_pairs)
 
 
 def refit_state_space(model: StateSpaceModel, pairs) -> StateSpaceFit:

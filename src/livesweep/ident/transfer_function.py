@@ -1,4 +1,4 @@
-"""Transfer-function models in the factored shorthand of the seed's Eq. 2.8, fitted with NAVFIT's cost.
+"""Transfer-function models in the factored shorthand of Tischler & Remple's Eq. 2.8, fitted with NAVFIT's cost.
 
 Shorthand (docs/method.md §7.3): ``(1/T)`` means ``(s + 1/T)``, ``[zeta, w]`` means
 ``(s^2 + 2 zeta w s + w^2)``, ``s`` / ``s^n`` a free differentiator (a root at the origin), the gain K
@@ -6,8 +6,8 @@ multiplies the factored form and a delay appears as ``e^(-tau s)``::
 
     T(s) = K * prod(numerator factors) / prod(denominator factors) * e^(-tau s)
 
-Because every factor is monic, K is the high-frequency gain times s^(relative degree), e.g. the
-seed's Eq. 2.9 ``p/da = -4.60 s [0.278, 1.93] e^(-0.0533 s) / ((0.0912)(1.00)[0.237, 1.67])``
+Because every factor is monic, K is the high-frequency gain times s^(relative degree), e.g.
+Tischler & Remple's Eq. 2.9 ``p/da = -4.60 s [0.278, 1.93] e^(-0.0533 s) / ((0.0912)(1.00)[0.237, 1.67])``
 has ``|p/da| * w -> 4.60`` at high frequency.
 
 Parameters: first-order factors by their inverse time constant ``1/T`` [rad/s] (key ``"1/T"``),
@@ -20,7 +20,7 @@ Fitting (:func:`fit_transfer_function`) minimises the sum of squares of
 :func:`livesweep.ident.cost.residuals`, i.e. the cost J of docs/method.md §7.1 summed over the pairs, with
 ``scipy.optimize.least_squares`` (trust-region reflective, ``x_scale='jac'``, analytic Jacobian of
 the model's log-response mapped through the cost's own residual function). Several pairs may be
-fitted together with one shared denominator (the seed's Eq. 2.7: common lateral-directional
+fitted together with one shared denominator (Tischler & Remple's Eq. 2.7: common lateral-directional
 denominator, distinct numerators with their own gain, zeros and delay).
 
 Accuracy (docs/method.md §8.4): the Gauss-Newton Hessian of J is ``H = 2 D^T D`` with ``D = dr/dtheta``
@@ -167,7 +167,7 @@ def _arg(tok: str, text: str, what: str):
 
 
 def parse_structure(text, *, prefix: str = "") -> Structure:
-    """Parse the factored shorthand of the seed's Eq. 2.8.
+    """Parse the factored shorthand of Tischler & Remple's Eq. 2.8.
 
     Parameters
     ----------
@@ -312,7 +312,7 @@ class FittedTransferFunction:
     ----------
     name, output, input : str
     gain : float
-        K of the factored form (output units per input unit times s^(relative degree)).
+        K of the factored form (output units per input unit times s^-(n_poles - n_zeros)).
     zeros, poles : ndarray, complex
         Roots [rad/s], numerator/denominator factors in the written order.
     delay_s : float
@@ -872,7 +872,7 @@ def fit_transfer_function(pairs, models, *, starts: Sequence[Mapping] | None = N
     models : TransferFunctionModel or list of them
         One model (used for every pair; with several pairs the results are named
         ``<name>_<output>_<input>``) or one per pair, all with the same denominator (shared:
-        the seed's Eq. 2.7); each pair has its own gain, numerator and delay.
+        Tischler & Remple's Eq. 2.7); each pair has its own gain, numerator and delay.
     starts : list of mapping, optional
         Extra starting values, key -> value (keys as in ``parameters``; ``"<tf name>.<key>"`` for one
         transfer function only). Missing keys are taken from the best automatic start; the gain,

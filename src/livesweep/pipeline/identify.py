@@ -115,10 +115,17 @@ class Identification:
 
     @property
     def model(self):
-        """The final state-space fit (StateSpaceFit): the residual loop's when it added effects,
-        else the state-space stage's; None without a state-space stage."""
-        if self.residual is not None and self.residual.loop.added:
-            return self.residual.loop.fit
+        """The final state-space model (StateSpaceFit): the residual loop's when it added effects
+        (judged on the state-space stage's frequency points, so its J_ave and bounds compare with
+        :attr:`model_before_loop`'s), else the state-space stage's; None without a state-space stage."""
+        if self.residual is not None and self.residual.final is not None:
+            return self.residual.final
+        return self.model_before_loop
+
+    @property
+    def model_before_loop(self):
+        """The state-space stage's fit (after structure reduction), before the residual loop
+        added anything; None without a state-space stage."""
         return self.state_space.fit if self.state_space is not None else None
 
 

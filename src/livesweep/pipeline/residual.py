@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from livesweep.config import Case, require_table
 from livesweep.errors import ConfigError
 from livesweep.ident.residual import FALSE_ALARM, KINDS, ResidualLoop, run_residual_loop
+from livesweep.ident.state_space import evaluate_state_space, select_pairs
 from livesweep.pipeline.parametric import VerificationRunner
 from livesweep.spectral.response import FrequencyResponseSet
 
@@ -29,12 +30,25 @@ _KEYS = {"enabled", "max_steps", "kinds", "false_alarm", "min_evidence"}
 
 @dataclass(frozen=True)
 class ResidualStage:
-    """The loop's result, the settings it ran with and, when it added effects, the final model's
-    verification per record (label, Verification) for the time-domain plots."""
+    """The loop's result, the settings it ran with and, when it added effects, the final model.
+
+    Attributes
+    ----------
+    loop : ResidualLoop
+    settings : ResidualSettings
+    verification_after : tuple of (label, Verification)
+        The final model driven on each ``[[verify]]`` record (empty when nothing was added).
+    final : StateSpaceFit or None
+        When effects were added: the loop's final fit judged on the state-space stage's
+        frequency points (:func:`~livesweep.ident.state_space.evaluate_state_space`), so its
+        J_ave, Cramer-Rao bounds and insensitivities compare with the stage's. The loop itself
+        judges each step on :data:`~livesweep.ident.residual.N_OMEGA_LOOP` points per pair.
+    """
 
     loop: ResidualLoop
-    settings: dict
+    settings: ResidualSettings
     verification_after: tuple = ()
+    final: object = None
 
 
 @dataclass(frozen=True)
@@ -110,5 +124,8 @@ def run_residual_stage(case: Case, frs: FrequencyResponseSet, ss, *, runner=None
     loop = run_residual_loop(case.tables["state_space"], ss.fit, frs, verify=verify if runner else None,
                              max_steps=settings.max_steps, kinds=list(settings.kinds),
                              false_alarm=settings.false_alarm, progress=progress)
-    after = tuple(runner(loop.fit.model, loop.fit.theta)) if runner is not None and loop.added else ()
-    return ResidualStage(loop, settings, after)
+    if not loop.added:
+        return ResidualStage(loop, settings)
+    after = tuple(runner(loop.fit.model, loop.fit.theta)) if runner is not None else ()
+    pairs, _ = select_pairs(frs, loop.fit.model)
+    return ResidualStage(loop, settings, after, evaluate_state_space(loop.fit, pairs))

@@ -79,6 +79,8 @@ class Panel:
         Drawn bands first, then lines in order, then reference lines.
     x_span : (float, float) or None
         A shaded interval of x [data units] (the fitting band).
+    x_span_label : str or None
+        The shaded interval's legend entry (None: not in the legend).
     y_limits : (float, float) or None
         None: the range of the finite data, with a 5 % margin.
     y_label, x_label, note : str
@@ -99,6 +101,7 @@ class Panel:
     bands: tuple = ()
     hlines: tuple = ()
     x_span: tuple | None = None
+    x_span_label: str | None = None
     y_limits: tuple | None = None
     y_label: str = ""
     x_label: str = ""
@@ -147,7 +150,7 @@ class Chart:
 
 def bode_chart(response: FrequencyResponse, *, title: str = "", units: tuple[str, str] = ("", ""),
                ordinary: FrequencyResponse | None = None, models: list | None = None,
-               fit_band_rad_s: tuple | None = None) -> Chart:
+               fit_band_rad_s: tuple | None = None, fit_band_label: str | None = None) -> Chart:
     """Magnitude [dB], phase [deg] and coherence against frequency [rad/s] of one pair.
 
     Parameters
@@ -159,17 +162,22 @@ def bode_chart(response: FrequencyResponse, *, title: str = "", units: tuple[str
         Output and input units, for the magnitude label.
     ordinary : FrequencyResponse, optional
         The unconditioned estimate of the same pair, drawn thin for comparison.
-    models : list of (label, omega, H), optional
-        Identified model responses to overlay (dashed); ``omega`` [rad/s], ``H`` complex.
+    models : list of (label, omega, H) or (label, omega, H, dashed[, colour]), optional
+        Identified model responses to overlay (dashed unless ``dashed`` is False); ``omega``
+        [rad/s], ``H`` complex; ``colour``: index into :data:`COLORS` (default: the next after
+        the data's), so a model keeps its colour on every plot.
     fit_band_rad_s : (float, float), optional
         The band the models were fitted over (shaded).
+    fit_band_label : str, optional
+        The shaded band's legend entry (default "fit band").
 
     Returns
     -------
     Chart
         The whole estimate faint, the points with coherence >= ``ADEQUATE_COHERENCE`` bold with
-        +/-1 random error shaded; the axis limits follow the coherent points; model phase on the
-        data's branch.
+        +/-1 random error shaded; the axis limits follow the coherent points and the models over
+        the coherent frequencies (a model far from the data is cut at the axes, never draws the
+        data small); model phase on the data's branch.
     """
     w = np.asarray(response.omega, float)
     eps = np.where(np.isfinite(response.random_error), response.random_error, np.nan)
@@ -196,24 +204,35 @@ def bode_chart(response: FrequencyResponse, *, title: str = "", units: tuple[str
         ph_lines.append(Line(w, np.where(ok_o, ph_o, np.nan), color(1), 0.8))
     ref_w = w[shown][0] if shown.any() else w[0]
     ref_ph = ph[shown][0] if shown.any() else 0.0
-    for k, (name, wm, Hm) in enumerate(models or []):
+    w_lo, w_hi = (float(w[shown][0]), float(w[shown][-1])) if shown.any() else (float(w[0]), float(w[-1]))
+    extent = {"mag": [mag[shown]], "ph": [ph[shown]]}
+    for k, (name, wm, Hm, *style) in enumerate(models or []):
+        dashed = style[0] if style else True
+        c = color(style[1]) if len(style) > 1 else color(3 + k)
         wm, Hm = np.asarray(wm, float), np.asarray(Hm, complex)
         ph_m = np.rad2deg(np.unwrap(np.angle(Hm)))
         at = np.interp(np.log(ref_w), np.log(wm), ph_m)
         ph_m = ph_m + 360.0 * np.round((ref_ph - at) / 360.0)      # same branch as the data
         with np.errstate(divide="ignore"):
-            mag_lines.append(Line(wm, 20 * np.log10(np.abs(Hm)), color(3 + k), 1.4, dashed=True, label=name))
-        ph_lines.append(Line(wm, ph_m, color(3 + k), 1.4, dashed=True))
+            mag_m = 20 * np.log10(np.abs(Hm))
+        mag_lines.append(Line(wm, mag_m, c, 1.4, dashed=dashed, label=name))
+        ph_lines.append(Line(wm, ph_m, c, 1.4, dashed=dashed))
+        inside = (wm >= w_lo) & (wm <= w_hi) & np.isfinite(mag_m) & np.isfinite(ph_m)
+        extent["mag"].append(mag_m[inside])
+        extent["ph"].append(ph_m[inside])
     limits = []
-    for y, pad in ((mag, 3.0), (ph, 15.0)):
+    for key, y, pad, reach in (("mag", mag, 3.0, 20.0), ("ph", ph, 15.0, 180.0)):
         if shown.any():
             lo, hi = float(np.min(y[shown])), float(np.max(y[shown]))
+            every = np.concatenate(extent[key])     # the models, at most ``reach`` beyond the data
+            lo, hi = max(min(lo, float(np.min(every))), lo - reach), min(max(hi, float(np.max(every))), hi + reach)
             limits.append((lo - pad - 0.1 * (hi - lo), hi + pad + 0.1 * (hi - lo)))
         else:
             limits.append(None)
     out_u, in_u = units
     span = tuple(float(v) for v in fit_band_rad_s) if fit_band_rad_s is not None else None
     p_mag = Panel(lines=tuple(mag_lines), bands=mag_bands, x_span=span, y_limits=limits[0], legend="lower left",
+                  x_span_label=(fit_band_label or "fit band") if span else None,
                   y_label=f"|{response.output}/{response.input}| [dB{' ' + out_u + '/' + in_u if out_u else ''}]",
                   x_tick_labels=False)
     p_ph = Panel(lines=tuple(ph_lines), bands=ph_bands, x_span=span, y_limits=limits[1], y_label="phase [deg]",

@@ -87,6 +87,24 @@ def state_space_export(fit, units: dict) -> dict:
                     "states in the units the model's equations give them"}
 
 
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def gain_units(fit, units: dict) -> str:
+    """Units of the gain K of a FittedTransferFunction's factored form.
+
+    Each factor (s + a) or s carries 1/s, so K is in output units per input unit times
+    s^-(n_poles - n_zeros): ``(deg/s)/deg·s⁻¹`` for a first-order p/da.
+    """
+    def wrap(u):
+        u = (u or "-").strip().replace("^2", "²").replace("^3", "³")
+        return f"({u})" if "/" in u or " " in u else u
+
+    base = f"{wrap(units.get(fit.output, ''))}/{wrap(units.get(fit.input, ''))}"
+    r = len(fit.poles) - len(fit.zeros)
+    return base if r == 0 else f"{base}·s{str(-r).translate(_SUPERSCRIPT)}"
+
+
 def polynomials(fit) -> dict:
     """Numerator and denominator coefficients (highest power first) of a FittedTransferFunction,
     ``T(s) = num(s) / den(s) * exp(-delay_s s)``."""

@@ -158,6 +158,10 @@ def _factor_text(f: dict) -> str:
     return str(f.get("kind", ""))
 
 
+def _ms(seconds):
+    return None if seconds is None else 1000.0 * seconds
+
+
 def _transfer_functions(report: dict) -> str:
     tfs = report.get("transfer_functions") or []
     if not tfs:
@@ -171,36 +175,46 @@ def _transfer_functions(report: dict) -> str:
         bad_cr = any(v is None or v > g["cramer_rao_pct"] for v in (t.get("cramer_rao_pct") or {}).values())
         band = t.get("band_rad_s") or []
         rows.append(f"<tr><td>{e(t['name'])}</td><td>{e(t['output'])}/{e(t['input'])}</td>"
-                    f"<td class='num'>{_num(t['gain'])}</td><td>{e(' '.join(num) or '1')}</td><td>{e(' '.join(den) or '1')}"
+                    f"<td class='num'>{_num(t['gain'])}</td><td>{e(t.get('gain_units') or '')}</td>"
+                    f"<td>{e(' '.join(num) or '1')}</td><td>{e(' '.join(den) or '1')}"
                     f"</td><td class='num'>{_num(1000 * t['delay_s'] if t.get('delay_s') is not None else None, '.1f')}</td>"
                     f"<td>{'%.2f – %.2f' % tuple(band) if len(band) == 2 else ''}</td>"
                     f"<td class='num {'flag' if t['cost'] is None or t['cost'] > g['cost_tf'] else ''}'>"
                     f"{_num(t['cost'], '.1f')}</td>"
                     f"<td class='{'flag' if bad_cr else ''}'>{e(crs)}</td></tr>")
     hq = []
+    sources = [("measured", "measured"), ("fitted", "TF fit"), ("model", "state-space model"),
+               ("model_before_loop", "model before the residual loop")]
+    if any((t.get("handling_qualities") or {}).get("model_before_loop") for t in tfs):
+        sources[2] = ("model", "final model")
+    shown = [(k, label) for k, label in sources if any((t.get("handling_qualities") or {}).get(k) for t in tfs)]
     for t in tfs:
         h = t.get("handling_qualities") or {}
-        m, f = h.get("measured") or {}, h.get("fitted") or {}
-        if not m and not f:
+        if not any(h.get(k) for k, _ in shown):
             continue
-        hq.append(f"<tr><td>{e(t['name'])}</td><td>{e(m.get('response') or f.get('response') or '')}</td>"
-                  f"<td class='num'>{_num(m.get('bandwidth_rad_s'), '.3g')}</td>"
-                  f"<td class='num'>{_num(1000 * m['phase_delay_s'] if m.get('phase_delay_s') is not None else None, '.0f')}</td>"
-                  f"<td class='num'>{_num(f.get('bandwidth_rad_s'), '.3g')}</td>"
-                  f"<td class='num'>{_num(1000 * f['phase_delay_s'] if f.get('phase_delay_s') is not None else None, '.0f')}</td></tr>")
+        resp = next((h[k].get("response") for k, _ in shown if h.get(k)), "")
+        cells = "".join(f"<td class='num'>{_num((h.get(k) or {}).get('bandwidth_rad_s'), '.3g')}</td>"
+                        f"<td class='num'>{_num(_ms((h.get(k) or {}).get('phase_delay_s')), '.0f')}</td>"
+                        for k, _ in shown)
+        hq.append(f"<tr><td>{e(t['name'])}</td><td>{e(resp or '')}</td>{cells}</tr>")
+    hq_head = "".join(f"<th>ω<sub>BW</sub> {e(label)} [rad/s]</th><th>τ<sub>p</sub> {e(label)} [ms]</th>"
+                      for _, label in shown)
     return ("<h2 id='tf'>Transfer functions</h2><p>T(s) = K · numerator / denominator · e<sup>−τs</sup>; "
             "first-order factors (s + 1/T), second-order [ζ, ω] = s² + 2ζωs + ω². Guidelines: J ≤ 100 "
             "(≤ 50 excellent), Cramér–Rao bounds ≤ 20 % of the value (<a href='#appendix'>appendix</a>). "
             "Polynomials: <code>report.json</code>.</p>"
-            "<table><tr><th>name</th><th>pair</th><th>K</th><th>numerator</th><th>denominator</th><th>τ [ms]</th>"
+            "<table><tr><th>name</th><th>pair</th><th>K</th><th>K units</th><th>numerator</th><th>denominator</th>"
+            "<th>τ [ms]</th>"
             "<th>band [rad/s]</th><th>J</th><th>CR [%]</th></tr>" + "".join(rows) + "</table>"
-            + ("<h3>Handling-qualities parameters</h3><table><tr><th>name</th><th>response</th>"
-               "<th>ω<sub>BW</sub> measured [rad/s]</th><th>τ<sub>p</sub> measured [ms]</th><th>ω<sub>BW</sub> fitted</th>"
-               "<th>τ<sub>p</sub> fitted [ms]</th></tr>" + "".join(hq) + "</table>" if hq else ""))
+            + ("<h3>Handling-qualities parameters</h3><table><tr><th>name</th><th>response</th>" + hq_head
+               + "</tr>" + "".join(hq) + "</table>" if hq else ""))
 
 
-def _parameter_table(params, units, removed=()) -> str:
+def _parameter_table(params, units, removed=(), before=None) -> str:
+    """Parameters with value, units, CR and I; with ``before`` (the parameters of the model before
+    the residual loop) two more columns give their value and CR there."""
     g = GUIDELINES
+    prior = {p["name"]: p for p in before or ()}
     rows = []
     for p in params:
         cr, ins = p.get("cramer_rao_pct"), p.get("insensitivity_pct")
@@ -209,17 +223,43 @@ def _parameter_table(params, units, removed=()) -> str:
         bad_cr = not p["fixed"] and (cr is None or cr > g["cramer_rao_pct"])
         bad_i = not p["fixed"] and ins is not None and ins > g["insensitivity_pct"]
         unit = units.get(p["name"])
+        extra = ""
+        if before is not None:
+            q = prior.get(p["name"])
+            extra = ("<td class='num'>—</td><td>added by the loop</td>" if q is None else
+                     f"<td class='num'>{_num(q['value'], '.5g')}</td>"
+                     f"<td class='num'>{'fixed' if q['fixed'] else e(cr_text(q.get('cramer_rao_pct')))}</td>")
         rows.append(f"<tr><td>{e(p['name'])}</td><td class='num'>{_num(p['value'], '.5g')}</td>"
                     f"<td>{e(unit) if unit else '<i>see the model</i>'}</td><td>{e(status)}</td>"
                     f"<td class='num {'flag' if bad_cr else ''}'>{'' if p['fixed'] else e(cr_text(cr))}</td>"
-                    f"<td class='num {'flag' if bad_i else ''}'>{'' if p['fixed'] else _num(ins, '.1f')}</td></tr>")
-    return ("<table><tr><th>parameter</th><th>value</th><th>units</th><th></th><th>CR [%]</th><th>I [%]</th></tr>"
-            + "".join(rows) + "</table>")
+                    f"<td class='num {'flag' if bad_i else ''}'>{'' if p['fixed'] else e(cr_text(ins))}</td>"
+                    f"{extra}</tr>")
+    head = "<th>before the loop</th><th>CR before [%]</th>" if before is not None else ""
+    return ("<table><tr><th>parameter</th><th>value</th><th>units</th><th></th><th>CR [%]</th><th>I [%]</th>"
+            + head + "</tr>" + "".join(rows) + "</table>")
 
 
-def _mode_table(eigenvalues) -> str:
-    rows = []
-    for m in modes(eigenvalues):
+def _mode_rows(section: dict) -> list[dict]:
+    """The mode rows of a model section: named (``modes``) or, for a report without names, from
+    the eigenvalues."""
+    return section.get("modes") or modes(section.get("eigenvalues") or [])
+
+
+def _mode_text(m: dict) -> str:
+    if m["kind"] == "oscillatory":
+        return f"ω<sub>n</sub> {_num(m['omega_n_rad_s'], '.3g')} rad/s, ζ {_num(m['zeta'], '.3f')}"
+    if m.get("time_constant_s") is not None:
+        return f"T {_num(m['time_constant_s'], '.3g')} s"
+    if m.get("time_to_double_s") is not None:
+        return f"doubles in {_num(m['time_to_double_s'], '.3g')} s"
+    return _num(m["eigenvalue"][0], ".4g")
+
+
+def _mode_table(rows, before=None) -> str:
+    """The modes (named by their eigenvectors where the model's states allow); with ``before``
+    (the modes of the model before the residual loop), each mode's nearest one there beside it."""
+    out = []
+    for m in rows:
         re_, im = m["eigenvalue"]
         lam = f"{re_:.4g} ± {im:.4g}j" if m["kind"] == "oscillatory" else f"{re_:.4g}"
         if m["kind"] == "oscillatory":
@@ -230,16 +270,27 @@ def _mode_table(eigenvalues) -> str:
             td = m.get("time_to_double_s")
             what = ("<td></td><td></td><td></td>"
                     f"<td class='num'>{_num(tc, '.3g') if tc is not None else ('doubles in ' + _num(td, '.3g') if td else '')}</td>")
-        rows.append(f"<tr class='{'' if m['stable'] else 'flag'}'><td>{e(m['kind'])}</td><td class='num'>{e(lam)}</td>"
-                    f"{what}<td>{'stable' if m['stable'] else 'unstable'}</td></tr>")
+        extra = ""
+        if before is not None:      # the same name, else the nearest eigenvalue; added dynamics had none
+            lam_c = complex(re_, im)
+            same = [b for b in before if m.get("name") and b.get("name") == m["name"]]
+            near = min(same or before, key=lambda b: abs(complex(*b["eigenvalue"]) - lam_c), default=None)
+            extra = ("<td>— (added by the loop)</td>" if m.get("added_state") else "<td></td>" if near is None else
+                     f"<td>{e(near.get('name') or near['kind'])}: {_mode_text(near)}</td>")
+        out.append(f"<tr class='{'' if m['stable'] else 'flag'}'><td>{e(m.get('name') or m['kind'])}</td>"
+                   f"<td class='num'>{e(lam)}</td>{what}<td>{'stable' if m['stable'] else 'unstable'}</td>{extra}</tr>")
+    head = "<th>the mode before the loop</th>" if before is not None else ""
     return ("<table><tr><th>mode</th><th>eigenvalue [1/s]</th><th>ω<sub>n</sub> [rad/s]</th><th>ζ</th><th>period [s]</th>"
-            "<th>time constant [s]</th><th></th></tr>" + "".join(rows) + "</table>")
+            "<th>time constant [s]</th><th></th>" + head + "</tr>" + "".join(out) + "</table>")
 
 
 def _state_space(report: dict) -> str:
-    ss = report.get("state_space")
-    if not ss:
+    pre = report.get("state_space")
+    if not pre:
         return ""
+    final = report.get("model") or {}
+    looped = final.get("source") == "residual-loop"
+    ss = final if looped else pre
     cost = ss["cost"]
     pairs = ", ".join(f"{c['output']}/{c['input']} {_num(c['cost'], '.0f')}" for c in cost["pairs"])
     su = ss.get("state_units") or {}
@@ -249,13 +300,23 @@ def _state_space(report: dict) -> str:
     outs = ", ".join(f"{n} [{u}]" for n, u in zip(m.get("outputs", []), m.get("output_units", [])))
     missing = "" if su else (" <b>The case gives no units for the states</b> (<code>[state_space.units]</code>), so "
                              "derivatives are shown without units.")
-    return (f"<h2 id='ss'>State-space model</h2><p>States {e(states)}; inputs {e(ins)}; outputs {e(outs)}.{missing} "
+    story = ""
+    if looped:
+        story = (f"<p><b>This is the final model: {e(final['label'])}</b>, as the residual loop left it "
+                 f"(<a href='#residual'>residual loop</a>; <code>augmented_case.toml</code>). J<sub>ave</sub> "
+                 f"{_num(pre['cost']['average'], '.2f')} before the loop → {_num(cost['average'], '.2f')} after it, both "
+                 f"on the state-space stage's {final['points_per_pair']} points per pair. The columns “before the "
+                 "loop” give the model the state-space stage identified, for comparison.</p>")
+    title = "State-space model" + (f": final, {e(final['label'])}" if looped else "")
+    return (f"<h2 id='ss'>{title}</h2>{story}<p>States {e(states)}; inputs {e(ins)}; outputs {e(outs)}.{missing} "
             f"J<sub>ave</sub> = {_num(cost['average'], '.2f')} (guideline ≤ {GUIDELINES['cost_ss']:.0f}); per pair: "
             f"{e(pairs)}. A derivative's units are those of its state's rate per unit of the state or input it "
             "multiplies. Flagged: CR &gt; 20 %, insensitivity &gt; 10 %. Matrices A, B, C, D: <code>report.json</code> "
             "and <code>frequency_responses.mat</code>.</p>"
-            + _parameter_table(ss["parameters"], ss.get("parameter_units") or {}, ss.get("removed_parameters") or ())
-            + "<h3>Modes</h3>" + _mode_table(ss.get("eigenvalues") or []))
+            + _parameter_table(ss["parameters"], ss.get("parameter_units") or {}, ss.get("removed_parameters") or (),
+                               before=pre["parameters"] if looped else None)
+            + "<h3>Modes</h3><p>Named by their eigenvectors (the states that dominate each mode).</p>"
+            + _mode_table(_mode_rows(ss), before=_mode_rows(pre) if looped else None))
 
 
 def _verification(report: dict) -> str:
@@ -263,6 +324,10 @@ def _verification(report: dict) -> str:
     if not ver:
         return ""
     g = GUIDELINES
+    final = report.get("model") or {}
+    after = {r["label"]: r for r in (report.get("residual_loop") or {}).get("verification_final", [])}
+    if final.get("source") == "residual-loop" and after:
+        return _verification_final(ver, after, final)
     blocks = []
     for r in ver["records"]:
         ok = r.get("passed")
@@ -278,6 +343,38 @@ def _verification(report: dict) -> str:
             f"Guidelines: J<sub>rms</sub> ≤ {g['j_rms']:g}, TIC ≤ {g['tic']:g}.</p>" + "".join(blocks))
 
 
+def _verification_final(ver: dict, after: dict, final: dict) -> str:
+    """Verification when the residual loop changed the model: the final model's J_rms and TIC,
+    the model before the loop's beside them, and the final model's time histories."""
+    g = GUIDELINES
+
+    def cell(v, limit):
+        return f"<td class='num {'' if v is not None and v <= limit else 'flag'}'>{_num(v, '.3f')}</td>"
+
+    blocks = []
+    for r in ver["records"]:
+        a = after.get(r["label"])
+        if a is None:
+            continue
+        names = [o["name"] for o in r["outputs"]]
+        head = "".join(f"<th>TIC {e(n)}</th>" for n in names)
+        ok = (a["j_rms"] is not None and a["j_rms"] <= g["j_rms"]
+              and all(a["tic"].get(n) is not None and a["tic"][n] <= g["tic"] for n in names))
+        rows = (f"<tr><td>final model</td>{cell(a['j_rms'], g['j_rms'])}"
+                + "".join(cell(a["tic"].get(n), g["tic"]) for n in names) + "</tr>"
+                + f"<tr><td>before the residual loop</td>{cell(r['j_rms'], g['j_rms'])}"
+                + "".join(cell(o["tic"], g["tic"]) for o in r["outputs"]) + "</tr>")
+        blocks.append(f"<h3>{e(r['label'])}: the final model {'passes' if ok else 'FAILS'} the guidelines</h3>"
+                      f"<table><tr><th>model</th><th>J<sub>rms</sub></th>{head}</tr>{rows}</table>"
+                      + _img(a.get("plot"), 760, "verification of the final model " + r["label"])
+                      + (f"<p class='info'>The model before the loop on the same record: <code>{e(r['plot'])}</code>.</p>"
+                         if r.get("plot") else ""))
+    return ("<h2 id='verification'>Time-domain verification</h2><p>The final model "
+            f"({e(final['label'])}), no parameter changed, driven with the measured inputs of dissimilar manoeuvres; "
+            "biases and reference shifts by least squares; the model before the residual loop beside it. "
+            f"Guidelines: J<sub>rms</sub> ≤ {g['j_rms']:g}, TIC ≤ {g['tic']:g}.</p>" + "".join(blocks))
+
+
 def _residual(report: dict) -> str:
     rl = report.get("residual_loop")
     if not rl:
@@ -287,6 +384,16 @@ def _residual(report: dict) -> str:
     blocks = [f"<p><b>{e(rl['conclusion'])}</b> ({rl['re_identifications']} re-identifications)"
               + (f"; augmented case: <code>{e(rl['augmented_case'])}</code>" if rl.get("augmented_case") else "")
               + "</p>"]
+    n_loop, ss, final = rl.get("points_per_pair"), report.get("state_space") or {}, report.get("model") or {}
+    if n_loop and ss and final:
+        blocks.append(
+            f"<p>The loop refits the model on {n_loop} points per pair (the state-space stage fits "
+            f"{final['points_per_pair']}: a lightly damped mode is narrower than their spacing), so the J<sub>ave</sub> "
+            "of its steps are on those points. On the stage's points: "
+            + (f"J<sub>ave</sub> {_num(ss['cost']['average'], '.2f')} before the loop, "
+               f"{_num(final['cost']['average'], '.2f')} for the final model ({e(final['label'])}; "
+               "<a href='#ss'>state-space model</a>).</p>" if final.get("source") == "residual-loop" else
+               f"J<sub>ave</sub> {_num(ss['cost']['average'], '.2f')}, the model unchanged.</p>"))
     for k, st in enumerate(rl["steps"]):
         eff = st["effect"]
         cands = ", ".join(f"{c['kind']} at {c['where']} ({c['evidence']:.0f})" for c in st["candidates"][:4])
@@ -302,8 +409,9 @@ def _residual(report: dict) -> str:
                f"residual to screen); each absent entry that gives one was refitted on every pair, the new one "
                f"included, and the lowest J<sub>ave</sub> within the guidelines kept."
                if eff and eff.get("gives_a_path_for") else f"Strongest candidates (evidence, noise units): {e(cands)}")
+        on = f" (on {n_loop} points per pair)" if n_loop else ""
         blocks.append(f"<h3>Step {k + 1}: {head}</h3><p>J<sub>ave</sub> {st['cost_before']:.2f} → "
-                      f"{st['cost_after']:.2f}{ver}. {why}</p>"
+                      f"{st['cost_after']:.2f}{on}{ver}. {why}</p>"
                       + (f"<ul>{tried}</ul>" if tried else "") + _img(st.get("plot"), 1100, f"residual step {k + 1}"))
     if rl.get("parameter_units") and rl.get("augmented_case"):
         final = {p["name"]: p for e_ in model_effects(st["effect"] for st in rl["steps"]) for p in e_["parameters"]}
@@ -312,8 +420,8 @@ def _residual(report: dict) -> str:
                 [{"name": n, "value": p["value"], "fixed": bool(p.get("fixed")), "cramer_rao_pct": p.get("cramer_rao_pct"),
                   "insensitivity_pct": p.get("insensitivity_pct")} for n, p in final.items()], rl["parameter_units"]))
     for r in rl.get("verification_final", []):
-        blocks.append(f"<p>Time domain after the loop, {e(r['label'])}: J<sub>rms</sub> {_num(r['j_rms'], '.3f')}</p>"
-                      + _img(r.get("plot"), 760, "verification after the loop"))
+        blocks.append(f"<p>Time domain after the loop, {e(r['label'])}: J<sub>rms</sub> {_num(r['j_rms'], '.3f')} "
+                      "(<a href='#verification'>time-domain verification</a>)</p>")
     unexplained = [u for u in rl.get("unexplained") or [] if "pair" in u]
     if unexplained:
         blocks.append("<p>Still above noise after the loop: " + e(", ".join(

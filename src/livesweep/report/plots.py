@@ -42,7 +42,7 @@ def to_figure(chart: Chart) -> Figure:
                 ax.set_xscale("log")
                 ax.xaxis.set_minor_locator(matplotlib.ticker.NullLocator())   # a third of the drawing time
             if p.x_span is not None:
-                ax.axvspan(*p.x_span, color="0.85", alpha=0.4, lw=0)
+                ax.axvspan(*p.x_span, color="0.85", alpha=0.4, lw=0, label=p.x_span_label)
             for b in p.bands:
                 ax.fill_between(b.x, b.lo, b.hi, color=b.color, alpha=b.alpha, lw=0, label=b.label)
             for s in p.lines:

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import math
 
-from livesweep.ident.accuracy import MAX_COST, MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT
+from livesweep.ident.accuracy import (MAX_COST, MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT,
+                                      NOT_DETERMINED_PCT, pct_text)
 from livesweep.ident.verify import J_RMS_MAX, TIC_MAX
 from livesweep.spectral.adequacy import MAX_RANDOM_ERROR, MIN_COHERENCE
 
@@ -27,17 +28,14 @@ GUIDELINES = {
     "j_rms": J_RMS_MAX,                            # time-domain verification
     "tic": TIC_MAX,                                # Theil inequality coefficient
     "zeta_max": 2.0,             # a second-order factor more damped than this is two first-order ones
-    "not_identifiable_pct": 1000.0,   # CR beyond this: the data say nothing about the parameter
+    "not_identifiable_pct": NOT_DETERMINED_PCT,   # CR beyond this: the data say nothing about the parameter
 }
 
 
 def cr_text(pct) -> str:
-    """A Cramer-Rao bound [% of value] for display: ``12.3``, ``> 1000 (not identifiable)``."""
-    if pct is None or not math.isfinite(pct):
-        return "not identifiable"
-    if pct > GUIDELINES["not_identifiable_pct"]:
-        return f"> {GUIDELINES['not_identifiable_pct']:.0f} (not identifiable)"
-    return f"{pct:.1f}"
+    """A Cramer-Rao bound [% of value] for display: ``12.3``, or ``not determined`` (not finite, or
+    beyond :data:`~livesweep.ident.accuracy.NOT_DETERMINED_PCT`)."""
+    return pct_text(pct, ".1f")
 
 
 def figure(value, spec: str) -> str:
@@ -136,8 +134,10 @@ def stage_summary(report: dict) -> list[dict]:
                     flags.append(f"{t['name']}: a root at {abs(w):.3g} rad/s, a decade outside the fitted band "
                                  f"{band[0]:.3g}-{band[1]:.3g} rad/s (not determined by the data)")
         out.append(_row("transfer-functions", "; ".join(parts), flags))
+    final = report.get("model") or {}
+    looped = final.get("source") == "residual-loop"
     if "state-space" in ran:
-        ss = report["state_space"]
+        ss = final if looped else report["state_space"]       # the row signs the model the report gives
         free = [p for p in ss["parameters"] if not p["fixed"]]
         flags, info = [], []
         J = ss["cost"]["average"]
@@ -162,8 +162,13 @@ def stage_summary(report: dict) -> list[dict]:
         removed = ss.get("removed_parameters") or []
         if removed:
             info.append("removed in structure reduction: " + ", ".join(removed))
-        out.append(_row("state-space", f"J_ave {J:.1f}, {len(free)} free parameters" if J is not None else
-                        f"{len(free)} free parameters", flags, info))
+        result = f"J_ave {J:.1f}, {len(free)} free parameters" if J is not None else f"{len(free)} free parameters"
+        if looped:
+            before = final["before_loop"]["cost_average"]
+            result = (f"final model, {final['label']}: {result} (before the residual loop: J_ave "
+                      f"{figure(before, '.1f')}, {sum(not p['fixed'] for p in report['state_space']['parameters'])} "
+                      f"free parameters; both on {final['points_per_pair']} points per pair)")
+        out.append(_row("state-space", result, flags, info))
     if "verification" in ran:
         ver = report["verification"]
         flags, parts = [], []
@@ -175,6 +180,16 @@ def stage_summary(report: dict) -> list[dict]:
                     if o["tic"] is None or o["tic"] > g["tic"]]
             if high:
                 flags.append(f"{r['label']}: TIC > {g['tic']:g} on " + ", ".join(high))
+        if looped and final.get("verification"):      # the model the report signs, the one before it beside it
+            flags = []
+            parts = [f"{r['label']}: J_rms {figure(r['j_rms'], '.3f')} (before the residual loop "
+                     f"{figure(b['j_rms'], '.3f')})" for r, b in zip(final["verification"], ver["records"])]
+            for r in final["verification"]:
+                if r["j_rms"] is None or r["j_rms"] > g["j_rms"]:
+                    flags.append(f"{r['label']}: J_rms = {figure(r['j_rms'], '.3f')} > {g['j_rms']:g}")
+                high = [f"{n} {figure(t, '.3f')}" for n, t in r["tic"].items() if t is None or t > g["tic"]]
+                if high:
+                    flags.append(f"{r['label']}: TIC > {g['tic']:g} on " + ", ".join(high))
         out.append(_row("verification", "; ".join(parts), flags))
     if "residual-loop" in ran:
         rl = report["residual_loop"]

@@ -13,13 +13,13 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from livesweep.report.chart import LIGHT_GREY, Chart, Panel
+from livesweep.report.chart import LIGHT_GREY, Band, Chart, Panel
 
 __all__ = ["to_svg", "linear_ticks", "angle_ticks", "log_ticks"]
 
 PT_PER_IN = 72.0
-TICK_FONT = 8.5
-LEGEND_FONT = 8.0
+TICK_FONT = 11.0
+LEGEND_FONT = 9.5
 GRID = "#b0b0b0"
 MINOR_GRID = "#e6e6e6"
 SPAN_FILL, SPAN_ALPHA = LIGHT_GREY, 0.4
@@ -240,6 +240,9 @@ def _panel(out: list, p: Panel, box: tuple, xr: tuple, uid: str) -> None:
 
 def _legend(out: list, p: Panel, box: tuple) -> None:
     entries = [("band", b) for b in p.bands if b.label] + [("line", s) for s in p.lines if s.label]
+    if p.x_span is not None and p.x_span_label:
+        entries.append(("band", Band(np.asarray(p.x_span, float), np.zeros(2), np.zeros(2), SPAN_FILL,
+                                     max(SPAN_ALPHA, 0.6), p.x_span_label)))
     if not entries:
         return
     x0, y0, w, h = box
@@ -307,9 +310,10 @@ def to_svg(chart: Chart) -> str:
     out = [f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {W:.0f} {H:.0f}" width="{W:.0f}" height="{H:.0f}" '
            'font-family="DejaVu Sans, Helvetica, Arial, sans-serif">',
            f'<rect width="{W:.0f}" height="{H:.0f}" fill="#fff"/>']
-    if chart.title:
-        out.append(f'<text x="{W / 2:.1f}" y="{(1 - chart.margins[2]) * H * 0.62 + chart.title_size * 0.35:.1f}" '
-                   f'font-size="{chart.title_size:g}" text-anchor="middle">{escape(chart.title)}</text>')
+    if chart.title:        # a long title is set smaller rather than cut at the edges (0.6 em a character)
+        size = min(chart.title_size, 0.96 * W / (0.6 * len(chart.title)))
+        out.append(f'<text x="{W / 2:.1f}" y="{(1 - chart.margins[2]) * H * 0.62 + size * 0.35:.1f}" '
+                   f'font-size="{size:.3g}" text-anchor="middle">{escape(chart.title)}</text>')
     for r, c, box in _layout(chart):
         p = chart.rows[r][c] if c < len(chart.rows[r]) else None
         if p is not None:

@@ -13,7 +13,7 @@ from pathlib import Path
 from livesweep import __version__
 from livesweep.errors import ConfigError
 from livesweep.numbers import finite_or_none
-from livesweep.report.export import (RESPONSES_CSV, RESPONSES_MAT, polynomials, state_space_export,
+from livesweep.report.export import (RESPONSES_CSV, RESPONSES_MAT, gain_units, polynomials, state_space_export,
                                      write_responses_csv, write_responses_mat)
 from livesweep.report.chart import bode_chart, residual_chart, time_history_chart
 from livesweep.report.html import render as render_html
@@ -146,23 +146,26 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
     draw = plots
     tf_fits = list(transfer_functions.fits) if transfer_functions is not None else []
     ss_fit = state_space.fit if state_space is not None else None
+    final_fit = residual.final if residual is not None and residual.final is not None else ss_fit
+    changed = final_fit is not ss_fit
     for pair in best.pairs():
         ordinary = an.siso.pair(pair.output, pair.input) if best.conditioned else None
         rel = _plot_rel(f"{pair.output}_{pair.input}", taken)
         models, band = [], None
         for f in tf_fits:
             if (f.output, f.input) == (pair.output, pair.input):
-                models.append((f"TF {f.name} (J {f.cost:.0f})", pair.omega, f.response(pair.omega)))
-                band = f.band_rad_s
-        ssm = ss_fit.model if ss_fit is not None else None
-        if ssm is not None and pair.output in ssm.outputs and pair.input in ssm.inputs:
-            T = ss_fit.frequency_response(pair.omega)[list(ssm.outputs).index(pair.output), list(ssm.inputs).index(pair.input)]
-            j = next((c for o, i, c in ss_fit.cost_pairs if (o, i) == (pair.output, pair.input)), None)
-            models.append(("state space" + (f" (J {j:.0f})" if j is not None else ""), pair.omega, T))
+                models.append((f"TF {f.name} (J {f.cost:.0f})", pair.omega, f.response(pair.omega), True, 3))
+                band = f.band_rad_s, f"fit band of TF {f.name}"
+        if changed:        # the model the report signs drawn solid, the one before the loop dashed beside it
+            models += _ss_curves(final_fit, pair, "final model", dashed=False, colour=4)
+            models += _ss_curves(ss_fit, pair, "before the residual loop", colour=5)
+        else:
+            models += _ss_curves(ss_fit, pair, "state space", colour=4)
         if draw:
             _write_svg(bode_chart(pair, title=f"{case.name}: {pair.output} / {pair.input}",
                                   units=(units.get(pair.output, ""), units.get(pair.input, "")), ordinary=ordinary,
-                                  models=models, fit_band_rad_s=band), out / rel)
+                                  models=models, fit_band_rad_s=band[0] if band else None,
+                                  fit_band_label=band[1] if band else None), out / rel)
         responses.append({**pair.to_dict(), "output_units": units.get(pair.output, ""),
                           "input_units": units.get(pair.input, ""), "plot": rel if draw else None})
     report = {
@@ -178,15 +181,15 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
     stages = report["stages"]
     if transfer_functions is not None:
         stages.append("transfer-functions")
-        report["transfer_functions"] = [{**f.to_dict(), "polynomials": polynomials(f),
-                                         "handling_qualities": (transfer_functions.handling or {}).get(f.name)}
+        report["transfer_functions"] = [{**f.to_dict(), "gain_units": gain_units(f, units),
+                                         "polynomials": polynomials(f),
+                                         "handling_qualities": _handling(transfer_functions, f, final_fit,
+                                                                         ss_fit if changed else None, best, units)}
                                         for f in tf_fits]
         report["data_quality"]["notes"] += list(transfer_functions.notes)
     if ss_fit is not None:
         stages.append("state-space")
-        report["state_space"] = {**ss_fit.to_dict(), "matrices": state_space_export(ss_fit, units),
-                                 "parameter_units": parameter_units(case.tables["state_space"], units),
-                                 "state_units": dict(case.tables["state_space"].get("units") or {})}
+        report["state_space"] = _model_dict(ss_fit, case.tables["state_space"], units)
         report["data_quality"]["notes"] += list(state_space.notes)
     if verification is not None:
         stages.append("verification")
@@ -226,9 +229,10 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
         report["ill_conditioned"] = best.ill_conditioned.astype(bool).tolist()
     save_response_set(best, out / RESPONSE_SET_FILE)
     report["frequency_response_set"] = RESPONSE_SET_FILE
-    final = residual.loop.fit if residual is not None and residual.loop.added else ss_fit
+    if ss_fit is not None:
+        report["model"] = _final_model(report, residual if changed else None, final_fit, units)
     write_responses_csv(best, out / RESPONSES_CSV, units)
-    write_responses_mat(best, out / RESPONSES_MAT, units, final)
+    write_responses_mat(best, out / RESPONSES_MAT, units, final_fit)
     report["exports"] = {"csv": RESPONSES_CSV, "mat": RESPONSES_MAT}
     if best.conditioned:
         save_response_set(an.siso, out / ("ordinary_" + RESPONSE_SET_FILE))
@@ -239,6 +243,73 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
     _atomic_write(path, json.dumps(report, indent=1, allow_nan=False))
     _atomic_write(out / "report.html", _embed_images(render_html(report), out))
     return path
+
+
+def _ss_curves(fit, pair, label: str, dashed: bool = True, colour: int = 4) -> list:
+    """The Bode overlay of a state-space fit on ``pair`` (none when the model lacks the pair)."""
+    m = fit.model
+    if pair.output not in m.outputs or pair.input not in m.inputs:
+        return []
+    T = fit.frequency_response(pair.omega)[list(m.outputs).index(pair.output), list(m.inputs).index(pair.input)]
+    j = next((c for o, i, c in fit.cost_pairs if (o, i) == (pair.output, pair.input)), None)
+    return [(label + (f" (J {j:.0f})" if j is not None else ""), pair.omega, T, dashed, colour)]
+
+
+def _handling(stage, tf, final_fit, before_fit, best, units) -> dict | None:
+    """The handling-qualities figures of a transfer function's pair: measured and fitted (the
+    stage's), and of the state-space model the report signs (``model``) and, when the residual
+    loop changed it, of the model before the loop (``model_before_loop``)."""
+    from livesweep.pipeline.parametric import handling_qualities
+
+    h = (stage.handling or {}).get(tf.name)
+    if h is None:
+        return None
+    h = dict(h)
+    resp = best.pair(tf.output, tf.input)
+    for key, fit in (("model", final_fit), ("model_before_loop", before_fit)):
+        if fit is None or tf.output not in fit.model.outputs or tf.input not in fit.model.inputs:
+            continue
+        T = fit.frequency_response(resp.omega)[list(fit.model.outputs).index(tf.output),
+                                               list(fit.model.inputs).index(tf.input)]
+        h[key] = handling_qualities(resp.omega, T, output_units=units.get(tf.output, ""))
+    return h
+
+
+def _model_dict(fit, table: dict, units: dict) -> dict:
+    """A state-space fit as ``report.json`` carries it: parameters, cost, matrices, units, named modes."""
+    from livesweep.ident.modes import name_modes
+
+    m = fit.matrices()
+    try:
+        named = [mode.to_dict() for mode in name_modes(m["A"], m["states"], units=dict(table.get("units") or {}))]
+    except ValueError:        # a matrix with non-finite entries: the eigenvalues say it (n/a modes)
+        named = []
+    return {**fit.to_dict(), "matrices": state_space_export(fit, units),
+            "parameter_units": parameter_units(table, units),
+            "state_units": dict(table.get("units") or {}), "modes": named}
+
+
+def _final_model(report: dict, residual, final_fit, units: dict) -> dict:
+    """``report.json``'s ``model``: the model the report signs. It is the residual loop's when the
+    loop added effects (judged on the state-space stage's points), else the state-space stage's.
+    ``before_loop`` names the section holding the model before the loop, with its J_ave and
+    verification, so the two compare on the same frequency points."""
+    from livesweep.ident.cost import N_OMEGA
+
+    ss = report["state_space"]
+    ver = [{"label": r["label"], "j_rms": r["j_rms"], "tic": {o["name"]: o["tic"] for o in r["outputs"]}}
+           for r in (report.get("verification") or {}).get("records", [])]
+    if residual is None:
+        return {"source": "state-space", "label": "state space", "effects_added": [], "points_per_pair": N_OMEGA,
+                **ss, "verification": ver, "before_loop": None}
+    added = [{"kind": e["kind"], "where": e["where"]} for e in residual.loop.added]
+    rl = report["residual_loop"]
+    return {"source": "residual-loop",
+            "label": "state space + " + ", ".join(f"{a['kind']} at {a['where']}" for a in added),
+            "effects_added": added, "points_per_pair": N_OMEGA,
+            **_model_dict(final_fit, residual.loop.table, units),
+            "verification": [{k: r[k] for k in ("label", "j_rms", "tic")} for r in rl.get("verification_final", [])],
+            "before_loop": {"section": "state_space", "cost_average": ss["cost"]["average"], "verification": ver}}
 
 
 def _inputs(case, stage) -> list[dict]:
@@ -267,7 +338,9 @@ def _remove_stale_plots(out: Path, written: set[str]) -> None:
 def _residual_section(case, loop, out: Path, taken: set[str], draw: bool = True) -> dict:
     from livesweep.report.case_file import write_augmented_case
 
-    d = loop.to_dict()
+    from livesweep.ident.residual import N_OMEGA_LOOP
+
+    d = {**loop.to_dict(), "points_per_pair": N_OMEGA_LOOP}
     for k, (step, sd) in enumerate(zip(loop.steps, d["steps"])):
         rel = _plot_rel(f"residual_step_{k + 1}", taken) if draw else None
         what = (f"added {step.effect['kind']} at {step.effect['where']}" if step.effect else "nothing added")
