@@ -2,8 +2,12 @@
 
 ``livesweep identify --out DIR`` and ``livesweep batch --out DIR`` each hold ``DIR/.livesweep.lock``
 (``flock``) while they write, so a second process aiming at the same folder fails at once with a
-clear error instead of mixing its files with the first one's. The lock goes with the process: a
-killed run leaves nothing that blocks the next one.
+clear error instead of mixing its files with the first one's. The owner deletes the lock file when
+it is done (while still holding the lock), so a finished run leaves no litter; the lock itself goes
+with the process, so the file a killed run leaves behind blocks nothing. Because the file can be
+deleted under a process that has just opened it, an acquirer checks after locking that the file it
+locked is still the one under that name (device and inode) and starts again if not: whoever holds
+the lock on the file at ``DIR/.livesweep.lock`` owns the folder, and only the owner removes it.
 
 A file has one owner too. A writer that writes a file in place (a live recording) holds an ``flock``
 on the file itself while it writes (:class:`livesweep.telemetry.mcap_log.McapLogWriter`). A writer
@@ -23,13 +27,14 @@ from livesweep.errors import ConfigError
 
 __all__ = ["LOCK_NAME", "check_file_free", "folder_lock", "install_file"]
 
-#: The lock file a writing command keeps in its output folder.
+#: The lock file a writing command keeps in its output folder while it writes (deleted when it is done).
 LOCK_NAME = ".livesweep.lock"
 
 
 @contextmanager
 def folder_lock(folder, what: str = "--out"):
-    """Hold the exclusive lock of ``folder`` (which must exist) for the ``with`` block.
+    """Hold the exclusive lock of ``folder`` (which must exist) for the ``with`` block; the lock
+    file is deleted when the block ends (a killed process leaves it, harmless: the lock went with it).
 
     Raises
     ------
@@ -37,23 +42,54 @@ def folder_lock(folder, what: str = "--out"):
         Naming ``what`` and the folder, when another process holds the lock or the lock file
         cannot be made.
     """
-    import fcntl
-
     path = Path(folder) / LOCK_NAME
+    fd = _lock_current_file(path, folder, what)
     try:
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT, 0o644)
-    except OSError as e:
-        raise ConfigError(f"{what} {str(folder)!r}: cannot make its lock file ({e.strerror or e})") from None
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            raise ConfigError(f"{what} {str(folder)!r}: another livesweep process is writing into it") from None
         os.ftruncate(fd, 0)
         os.write(fd, f"{os.getpid()}\n".encode())
         yield
     finally:
+        try:                        # delete it while still holding it, and only if it is still ours
+            if _same_inode(fd, path):
+                os.unlink(path)
+        except OSError:             # gone already, or a read-only folder: the lock still goes with the fd
+            pass
         os.close(fd)
+
+
+def _same_inode(fd: int, path: Path) -> bool:
+    """True when ``path`` names the file open as ``fd`` (same device and inode)."""
+    try:
+        st, now = os.fstat(fd), os.stat(path)
+    except FileNotFoundError:
+        return False
+    return (st.st_dev, st.st_ino) == (now.st_dev, now.st_ino)
+
+
+def _lock_current_file(path: Path, folder, what: str) -> int:
+    """Open (or make) the lock file ``path`` and lock it, non-blocking; returns the fd.
+
+    An owner deletes the file on release, so the file opened here may have been unlinked (and
+    perhaps replaced by another acquirer's) before the lock was taken: after locking, the locked
+    file must still be the one at ``path``, else it is closed and the whole is tried again.
+    """
+    import fcntl
+
+    for _ in range(100):                # each turn ends in the lock, a refusal, or a file that changed under us
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT, 0o644)
+        except OSError as e:
+            raise ConfigError(f"{what} {str(folder)!r}: cannot make its lock file ({e.strerror or e})") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            raise ConfigError(f"{what} {str(folder)!r}: another livesweep process is writing into it") from None
+        if _same_inode(fd, path):
+            return fd
+        os.close(fd)                    # its owner released and deleted it meanwhile: take the file there now
+    raise ConfigError(f"{what} {str(folder)!r}: its lock file {LOCK_NAME} keeps changing under this process; "
+                      "another livesweep process is using the folder")
 
 
 def _held_elsewhere(fd: int) -> bool:
