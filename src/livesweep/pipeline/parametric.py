@@ -145,7 +145,7 @@ def transfer_function_specs(case: Case) -> tuple[TransferFunctionSpec, ...]:
 def run_transfer_function_stage(case: Case, frs: FrequencyResponseSet,
                                 specs: tuple[TransferFunctionSpec, ...] | None = None) -> TransferFunctionStage | None:
     """Fit every ``[transfer_functions.*]`` of the case; models with the same denominator text
-    are fitted together with a shared denominator (the seed's Eq. 2.7). None when the case has none.
+    are fitted together with a shared denominator (Tischler & Remple's Eq. 2.7). None when the case has none.
 
     ``specs``: the case's parsed tables (:func:`transfer_function_specs`; parsed here when not given).
     """

@@ -1,10 +1,11 @@
-"""Linear vehicle models for the simulator: the XV-15 lateral-directional models of the seed and a
+"""Linear vehicle models for the simulator: the XV-15 lateral-directional models of Tischler & Remple
+(Aircraft and Rotorcraft System Identification, AIAA, chapter 2) and a
 small quadrotor's roll/pitch attitude dynamics in hover (:func:`quad_attitude`, SI units).
 
 Model structure (both flight conditions, body axes, level trim, small angles, M = I)::
 
     states  x = [v, p, r, phi]          v in ft/s, p and r in rad/s, phi in rad
-    inputs  u = [da, dr]                aileron and rudder in deg (the seed's G is per degree)
+    inputs  u = [da, dr]                aileron and rudder in deg (the book's G is per degree)
 
     v'   = Yv v + Yp p + (Yr - U0) r + g phi + Yda da + Ydr dr
     p'   = Lv v + Lp p + Lr r              + Lda da + Ldr dr
@@ -14,7 +15,7 @@ Model structure (both flight conditions, body axes, level trim, small angles, M 
     u(t) enters delayed: u_i(t - tau_i), one delay per input (tau_a, tau_r).
 
 ``U0`` (true airspeed, ft/s) enters only through the kinematic ``-U0 r`` term, so ``Yr`` is the
-aerodynamic derivative alone (the seed's Yr = 16.44 ft/s/rad; with Yr - U0 the Dutch roll and
+aerodynamic derivative alone (Table 2.1's Yr = 16.44 ft/s/rad; with Yr - U0 the Dutch roll and
 roll modes come out near the transfer-function poles of Eq. 2.9, with Yr alone they do not).
 ``g`` (32.174 ft/s^2) enters through the gravity term ``g phi``.
 
@@ -31,7 +32,7 @@ Turbulence enters as gust velocities ``v_g`` (ft/s) and ``p_g`` (rad/s): the aer
 on the air-relative motion ``v - v_g`` and ``p - p_g``, so the gust input matrix is minus the
 aerodynamic part of the v and p columns of F (and of the ay and beta output rows).
 
-The derivative values are Tables 2.1-2.4 of the seed as mapped in ``reference/method.md`` §11
+The derivative values are Tables 2.1-2.4 of that chapter as listed in docs/method.md §11
 (English units; eliminated parameters are zero).
 """
 
@@ -83,7 +84,7 @@ class LinearVehicleModel:
     gust_F, gust_H : ndarray
         How the gusts enter the state and output equations.
     seed_outputs : tuple of str
-        The outputs the seed identified this model from.
+        The outputs Tischler & Remple identified this model from.
     derivatives : dict
         The named stability and control derivatives the matrices were built from.
     constants : dict
@@ -211,12 +212,12 @@ def _xv15(name, description, d, U0, outputs, seed_outputs, delays):
 
 
 def xv15_cruise() -> LinearVehicleModel:
-    """XV-15 lateral-directional model in cruise, 170 kn true airspeed (seed Tables 2.1-2.2).
+    """XV-15 lateral-directional model in cruise, 170 kn true airspeed (Tischler & Remple, Tables 2.1-2.2).
 
     Returns
     -------
     LinearVehicleModel
-        Outputs ``p, r, ay, beta, phi`` (the seed identified from p, r, ay, beta); delays
+        Outputs ``p, r, ay, beta, phi`` (the book identified it from p, r, ay, beta); delays
         tau_a = 0.0892 s, tau_r = 0.03276 s.
     """
     d = {
@@ -239,7 +240,7 @@ def xv15_cruise() -> LinearVehicleModel:
 
 
 def xv15_hover() -> LinearVehicleModel:
-    """XV-15 lateral-directional model in hover, SCAS off (seed Tables 2.3-2.4).
+    """XV-15 lateral-directional model in hover, SCAS off (Tischler & Remple, Tables 2.3-2.4).
 
     The bare airframe has an unstable lateral oscillation (about 0.16 +/- 0.44j rad/s), so
     simulated manoeuvres need a stabilising pilot loop (see ``livesweep.sim.scenario``).
@@ -247,7 +248,7 @@ def xv15_hover() -> LinearVehicleModel:
     Returns
     -------
     LinearVehicleModel
-        Outputs ``p, r, ay, v, phi``; no delays (eliminated in the seed).
+        Outputs ``p, r, ay, v, phi``; no delays (eliminated in Tischler & Remple's identification).
     """
     d = {
         "Yv": -0.09755, "Yp": -1.489, "Yr": 0.0,

@@ -1,8 +1,8 @@
 """The sample logs shipped in ``replay_logs/``: their scenarios, defined once.
 
 ``replay_logs/regenerate.py`` writes them; the tests regenerate them and compare hashes.
-Each log stays under 5 MB, so each sweep axis gets its own log (two sweeps per axis, as in the
-seed's Fig. 2.4).
+Each log stays under 5 MB, so each sweep axis gets its own log (two sweeps per axis, as in
+Tischler & Remple's Fig. 2.4).
 """
 
 from __future__ import annotations

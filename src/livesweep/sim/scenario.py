@@ -458,7 +458,7 @@ def sweep_scenario(
     axes : tuple of str
         Inputs to sweep, in order.
     repeats : int
-        Sweeps per axis (the seed concatenates two).
+        Sweeps per axis (Tischler & Remple concatenate two).
     omega_min_rad_s, omega_max_rad_s, duration_s : float
         Sweep band [rad/s] and length [s] (see :class:`FrequencySweep`).
     amplitudes : dict of str -> float
