@@ -211,21 +211,24 @@ def summarize(ident) -> dict:
     -------
     dict
         ``pairs`` (number of frequency responses), ``band_rad_s`` (``{"out/in": [lo, hi] or None}``,
-        the widest band with gamma^2 >= 0.6 and eps_r <= 0.2), ``J`` (state-space J_ave, else the
-        worst transfer-function cost, else None), ``TIC`` (the largest Theil inequality coefficient
-        over every verification record and output, or None) and ``residual`` (the residual loop's
-        conclusion, or None).
+        the widest band with gamma^2 >= 0.6 and eps_r <= 0.2), ``J`` (J_ave of the final
+        state-space model, the residual loop's when it added an effect; else the worst
+        transfer-function cost, else None), ``TIC`` (the largest Theil inequality coefficient of
+        that model over every verification record and output, or None) and ``residual`` (the
+        residual loop's conclusion, or None).
     """
     band = {f"{a.output}/{a.input}": (list(a.widest_band_rad_s) if a.widest_band_rad_s else None)
             for a in ident.frequency_response.adequacy}
     J = None
-    if ident.state_space is not None:
-        J = _finite_or_none(ident.state_space.fit.cost_average)
+    if ident.model is not None:
+        J = _finite_or_none(ident.model.cost_average)
     if J is None and ident.transfer_functions is not None:
         costs = [c for c in (_finite_or_none(f.cost) for f in ident.transfer_functions.fits) if c is not None]
         J = max(costs) if costs else None
-    tics = [t for _, v in (ident.verification.results if ident.verification else ())
-            for t in (_finite_or_none(o.tic) for o in v.outputs) if t is not None]
+    results = ident.verification.results if ident.verification else ()
+    if ident.residual is not None and ident.residual.verification_after:
+        results = ident.residual.verification_after
+    tics = [t for _, v in results for t in (_finite_or_none(o.tic) for o in v.outputs) if t is not None]
     return {"pairs": len(list(ident.responses.pairs())), "band_rad_s": band, "J": J,
             "TIC": max(tics) if tics else None,
             "residual": ident.residual.loop.conclusion if ident.residual is not None else None}

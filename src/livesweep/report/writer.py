@@ -159,7 +159,7 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
         if changed:        # the model the report signs drawn solid, the one before the loop dashed beside it
             models += _ss_curves(final_fit, pair, "final model", dashed=False, colour=4)
             models += _ss_curves(ss_fit, pair, "before the residual loop", colour=5)
-        else:
+        elif ss_fit is not None:
             models += _ss_curves(ss_fit, pair, "state space", colour=4)
         if draw:
             _write_svg(bode_chart(pair, title=f"{case.name}: {pair.output} / {pair.input}",
