@@ -440,7 +440,7 @@ def _residual(report: dict) -> str:
 _APPENDIX = """
 <h2 id="appendix" class="appendix">Appendix: method and guidelines</h2><div class="appendix">
 <p>livesweep follows the frequency-response method of Tischler &amp; Remple (<i>Aircraft and Rotorcraft System
-Identification</i>, AIAA, 2nd ed. 2012). The steps and the numbers this report tests:</p>
+Identification</i>, AIAA, 2006). The steps and the numbers this report tests:</p>
 <ol>
 <li><b>Data consistency.</b> Signals are resampled onto one uniform grid; gaps are excluded (not interpolated) from
 spectral windows; wild points are replaced by a Hampel filter and counted; trims are removed. Where an attitude and
