@@ -29,8 +29,9 @@ def inspections():
 def test_inspect_describes_every_log_and_its_fields_with_units(inspections, log):
     ins = inspections[log]
     assert ins.duration_s > 0
-    if not ins.topics:                              # ROS 2 CDR recordings: said, not crashed on
-        assert any("not in JSON" in n for n in ins.notes)
+    if not any(t.decoded for t in ins.topics):      # ROS 2 CDR recordings: counted and said, not crashed on
+        assert ins.topics and any("does not decode" in n for n in ins.notes)
+        assert all(t.messages > 0 and t.encoding == "cdr" for t in ins.topics)
         return
     for t in ins.topics:
         assert t.messages > 0 and t.end_s >= t.start_s >= 0 and math.isfinite(t.rate_hz)
@@ -165,7 +166,7 @@ def test_a_tlog_is_read_in_one_pass_with_its_systemid_test_points_and_the_preset
     assert "the SystemID band up to 12 Hz needs 30 Hz" in fits["ardupilot-copter-quad-plus"].why
     assert fits["ardupilot-copter-quad-x"].why.startswith("the vehicle is QUAD/PLUS")
     text = format_inspection(ins)
-    assert "test points (ArduPilot SystemID):" in text and "(no telemetry in the log during it)" in text
+    assert "test points (ArduPilot SystemID):" in text and "1 announced but without data" in text
 
 
 def test_a_dataflash_log_names_the_presets_for_its_streamed_telemetry(inspections):

@@ -7,7 +7,8 @@ walk (DFReader stops at the first record whose type has no FMT): see *Damage*. T
 each type are then decoded column-wise with numpy and written in file order.
 
 :func:`iter_dataflash` gives the same records, valued the same way, as Python records in file
-order (``livesweep stream`` sends them as MAVLink).
+order (``livesweep stream`` sends them as MAVLink); :class:`DataflashLog` gives them column-wise,
+as numpy arrays per message type (``livesweep inspect``).
 
 Channels
     ``/dataflash/<NAME>`` per message type (``FMT``, ``PARM``, ``MSG``, ``ATT``, ``SIDD``,
@@ -92,7 +93,7 @@ from livesweep.convert.common import (MAX_BOOT_US, MIN_RECORD_FRACTION, UNIX_RAN
 from livesweep.errors import LogFormatError
 from livesweep.numbers import float_json_schema
 
-__all__ = ["DataflashRecord", "convert_dataflash", "iter_dataflash"]
+__all__ = ["DataflashRecord", "DataflashLog", "convert_dataflash", "iter_dataflash"]
 
 _HEAD = b"\xa3\x95"
 _FMT_TYPE = 0x80
@@ -117,6 +118,7 @@ _GPS_EPOCH_S = 315_964_800          # 1980-01-06 in UNIX seconds
 _GPS_LEAP_S = 18                    # GPS - UTC since 2017 (what pymavlink's DFReader subtracts)
 _UNIX_MIN_NS, _UNIX_MAX_NS = (s * 10**9 for s in UNIX_RANGE_S)
 _WINDOW = 65_536                    # records turned into Python values at a time (bounds memory)
+_PROGRESS_RECORDS = 50_000          # records framed between two progress calls
 
 
 class _Fmt(NamedTuple):
@@ -277,8 +279,11 @@ class _Index:
         return sum(len(o) * self.formats[t].len for t, o in self.offsets.items())
 
 
-def _index(data: bytes) -> _Index:
+def _index(data: bytes, progress=None) -> _Index:
     """Frame every record of ``data``, resynchronising past corruption.
+
+    ``progress(bytes framed, bytes in all, "bytes")``, when given, is called every
+    ``_PROGRESS_RECORDS`` records.
 
     A record is ``A3 95 <type>`` plus the length the type's FMT gives. In sync, records follow one
     another, as DFReader reads them. Anything else (flipped or zeroed bytes, a header overwritten,
@@ -292,11 +297,40 @@ def _index(data: bytes) -> _Index:
     lengths = {_FMT_TYPE: _FMT_LEN}
     n = len(data)
     pos, garbage_from = 0, None
+    until_progress = _PROGRESS_RECORDS
+
+    formats, offsets = idx.formats, idx.offsets
 
     def follows(p: int) -> bool:
         return p >= n - 1 or (data[p] == 0xA3 and data[p + 1] == 0x95)
 
     while pos < n:
+        if progress is not None:
+            until_progress -= 1
+            if not until_progress:
+                progress(pos, n, "bytes")
+                until_progress = _PROGRESS_RECORDS
+        # in sync, the common case: a record of a known type (not FMT) followed by a record header
+        if garbage_from is None and pos + 3 <= n and data[pos] == 0xA3 and data[pos + 1] == 0x95:
+            while True:
+                mtype = data[pos + 2]
+                length = lengths.get(mtype)
+                if mtype == _FMT_TYPE or length is None or mtype not in formats:
+                    break
+                nxt = pos + length
+                if nxt > n or not (nxt >= n - 1 or (data[nxt] == 0xA3 and data[nxt + 1] == 0x95)):
+                    break
+                offsets.setdefault(mtype, []).append(pos)
+                pos = nxt
+                if progress is not None:
+                    until_progress -= 1
+                    if not until_progress:
+                        progress(pos, n, "bytes")
+                        until_progress = _PROGRESS_RECORDS
+                if pos + 3 > n or data[pos] != 0xA3 or data[pos + 1] != 0x95:
+                    break
+            if pos >= n:
+                break
         mtype = data[pos + 2] if pos + 2 < n and data[pos] == 0xA3 and data[pos + 1] == 0x95 else None
         length = lengths.get(mtype)
         if (length is not None and pos + length > n) or (n - pos < 3 and _HEAD.startswith(data[pos:])):
@@ -600,14 +634,16 @@ class _Log:
     bad_time: int
 
 
-def _load(src: Path, partial: bool) -> _Log:
-    """Frame, decode and time every record of ``src`` (LogFormatError as convert_dataflash)."""
+def _load(src: Path, partial: bool, progress=None) -> _Log:
+    """Frame, decode and time every record of ``src`` (LogFormatError as convert_dataflash);
+    ``progress(done, total, unit)`` while framing (:func:`_index`) and decoding (``"message
+    types"``)."""
     try:
         data = src.read_bytes()
     except OSError as e:
         raise LogFormatError(f"{src}: cannot be read: {e.strerror or e}") from None
     _check_head(src, data)
-    idx = _index(data)
+    idx = _index(data, progress)
     n_bytes = len(data)
     _check_coverage(src, idx, n_bytes, partial)
     buf = np.frombuffer(data, dtype=np.uint8)
@@ -621,7 +657,9 @@ def _load(src: Path, partial: bool) -> _Log:
 
     # ---- decode every type, column-wise
     types: dict[int, _Type] = {}
-    for tid in sorted(idx.offsets):                 # channels in type-id order
+    for k, tid in enumerate(sorted(idx.offsets)):   # channels in type-id order
+        if progress is not None:
+            progress(k, len(idx.offsets), "message types")
         f = idx.formats[tid]
         t = _Type(tid, f.name, f.fmt, list(f.columns))
         t.offsets = np.asarray(idx.offsets[tid], dtype=np.int64)
@@ -684,6 +722,117 @@ def _load(src: Path, partial: bool) -> _Log:
         warnings.append(f"{bad_time} records with an impossible time stamp (over {MAX_BOOT_US} us since boot) "
                         "take the time of the record before them")
     return _Log(types, live, type_of[order], vt, order_pos, fmtu, skipped, warnings, bad_time)
+
+
+def _name_topics(types: dict[int, _Type], warnings: list) -> None:
+    """Each type's MCAP topic, ``/dataflash/<NAME>``; a second type of the same name gets
+    ``/dataflash/<NAME>_<type id>`` (with a warning)."""
+    names_used: dict[str, int] = {}
+    for t in types.values():
+        topic = f"/dataflash/{t.name}"
+        if t.name in names_used and names_used[t.name] != t.tid:
+            topic = f"/dataflash/{t.name}_{t.tid}"
+            warnings.append(f"two FMT types are named {t.name!r} (ids {names_used[t.name]} and {t.tid}): "
+                            f"the second is written on {topic}")
+        names_used.setdefault(t.name, t.tid)
+        t.topic = topic
+
+
+class DataflashLog:
+    """A DataFlash / sdlog2 log read column-wise: every message type's times and values as numpy
+    arrays, without a Python record per message (what ``livesweep inspect`` reads).
+
+    Topics, times and values are those :func:`convert_dataflash` writes: topic
+    ``/dataflash/<NAME>``, log time [ns] (boot time shifted to UNIX time by the first GPS time
+    unless ``gps_time`` is False), values in the declared units with the multipliers applied.
+
+    Parameters
+    ----------
+    src : str or Path
+    gps_time, partial : bool
+        As for :func:`convert_dataflash`.
+    progress : callable, optional
+        ``progress(done, total, unit)``, called now and then while the file is framed (``unit``
+        ``"bytes"``) and its message types decoded (``"message types"``).
+
+    Attributes
+    ----------
+    topics : tuple of str
+        In type-id order (the order the channels are written in).
+    records : int
+        Records read.
+    warnings : tuple of str
+        What :func:`convert_dataflash` would warn of (damage, duplicate type names).
+    skipped : dict of str -> int
+        As :attr:`ConversionResult.skipped`.
+
+    Raises
+    ------
+    LogFormatError
+        As :func:`convert_dataflash`.
+    """
+
+    def __init__(self, src, *, gps_time: bool = True, partial: bool = False, progress=None):
+        log = _load(Path(src), partial, progress)
+        warnings = list(log.warnings)
+        _name_topics(log.types, warnings)
+        offset_ns = _gps_offset_ns(log.types, log.order_pos, log.vt) if gps_time else None
+        self._log = log
+        self._log_ns = log.vt * 1000 + (offset_ns or 0)
+        self._by_topic = {t.topic: t for t in log.live}
+        self.topics = tuple(self._by_topic)
+        self.records = int(log.tsel.size)
+        self.warnings = tuple(warnings)
+        self.skipped = dict(log.skipped)
+
+    def times_ns(self, topic: str) -> np.ndarray:
+        """The log time [ns] of each record of ``topic``, in file order (int64)."""
+        return self._log_ns[self._log.order_pos[self._by_topic[topic].tid]]
+
+    def first(self, topic: str) -> dict:
+        """The first record of ``topic`` as ``{column: value}`` (the JSON record convert writes)."""
+        t = self._by_topic[topic]
+        return dict(zip(t.columns, t.rows(0, 1)[0]))
+
+    def units(self, topic: str) -> dict:
+        """``{column: unit}`` of ``topic`` (the channel's ``units`` metadata)."""
+        return dict(self._by_topic[topic].units)
+
+    def columns(self, topic: str) -> tuple[str, ...]:
+        """The column names of ``topic``."""
+        return tuple(self._by_topic[topic].columns)
+
+    def column(self, topic: str, name: str) -> np.ndarray | None:
+        """Column ``name`` of ``topic`` as float64 values, the records' values in file order; None
+        for a column that is not one number per record (text, arrays) or that ``topic`` lacks."""
+        t = self._by_topic[topic]
+        if name not in t.columns:
+            return None
+        i = t.columns.index(name)
+        if t.fmt[i] in _STRINGS or t.fmt[i] == "a":
+            return None
+        return np.asarray(t.convs[i](t.raw[f"f{i}"]), dtype=np.float64)
+
+    def iter_records(self, topics) -> Iterator[tuple[str, int, dict]]:
+        """``(topic, log time [ns], {column: value})`` of the records of ``topics``, in file order."""
+        log = self._log
+        want = frozenset(topics)
+        keep = np.array([t.topic in want for t in log.live], dtype=bool)
+        sel = np.flatnonzero(keep[log.tsel]) if log.live else np.zeros(0, dtype=np.int64)
+        live = log.live
+        names = [t.topic for t in live]
+        keys = [t.columns for t in live]
+        cursor = [0] * len(live)
+        for k0 in range(0, sel.size, _WINDOW):
+            at = sel[k0:k0 + _WINDOW]
+            win = log.tsel[at]
+            pending = {}
+            for ti, cnt in enumerate(np.bincount(win, minlength=len(live)).tolist()):
+                if cnt:
+                    pending[ti] = iter(live[ti].rows(cursor[ti], cursor[ti] + cnt))
+                    cursor[ti] += cnt
+            for ti, t_ns in zip(win.tolist(), self._log_ns[at].tolist()):
+                yield names[ti], t_ns, dict(zip(keys[ti], next(pending[ti])))
 
 
 def iter_dataflash(src, *, names=None, partial: bool = False) -> Iterator[DataflashRecord]:
@@ -773,15 +922,9 @@ def convert_dataflash(src, out, *, gps_time: bool = True, partial: bool = False,
     # ---- write
     with ConversionWriter(src, out, "dataflash", _firmware(types)) as w:
         writer = w.writer
-        names_used: dict[str, int] = {}
+        _name_topics(types, warnings)
         for t in types.values():
-            topic = f"/dataflash/{t.name}"
-            if t.name in names_used and names_used[t.name] != t.tid:
-                topic = f"/dataflash/{t.name}_{t.tid}"
-                warnings.append(f"two FMT types are named {t.name!r} (ids {names_used[t.name]} and {t.tid}): "
-                                f"the second is written on {topic}")
-            names_used.setdefault(t.name, t.tid)
-            t.topic = topic
+            topic = t.topic
             meta = {"units": json.dumps(t.units), "multipliers": json.dumps(t.mults), "format": t.fmt,
                     "type_id": str(t.tid), "instance_field": t.instance}
             writer.add_channel(topic, f"dataflash.{t.name}", _schema(t), meta)

@@ -25,6 +25,9 @@ time shifted onto UTC when the log knows UTC: the median over the GPS samples wi
 The offset used and its source are in the ``ulog`` metadata record. Messages are written in
 time order over all channels (stable: file order within a topic).
 
+:class:`UlogLog` gives the same topics, times and values column-wise, as numpy arrays, without
+writing them (``livesweep inspect``).
+
 Metadata
 --------
 The converter's ``source``/``conversion`` records (format version ``"ULog v<n>, <sys_name>
@@ -49,6 +52,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -58,13 +62,14 @@ from livesweep.convert.common import (MAX_BOOT_US, MIN_RECORD_FRACTION, UNIX_RAN
 from livesweep.errors import ConfigError, LogFormatError
 from livesweep.numbers import float_json_schema
 
-__all__ = ["convert_ulog", "ulog_topic_name"]
+__all__ = ["convert_ulog", "ulog_topic_name", "UlogLog"]
 
 _GPS_TOPICS = ("vehicle_gps_position", "sensor_gps")
 _UTC_MIN_US, _UTC_MAX_US = (s * 10**6 for s in UNIX_RANGE_S)   # below: "no fix yet"; above: corrupt
 _LOG_TOPIC = "/ulog/_logged_messages"
 _PARAM_TOPIC = "/ulog/_parameter_changes"
 _LEVELS = {0: "EMERG", 1: "ALERT", 2: "CRIT", 3: "ERR", 4: "WARNING", 5: "NOTICE", 6: "INFO", 7: "DEBUG"}
+_PROGRESS_BYTES = 1 << 20           # bytes read between two progress calls
 
 
 def _import_pyulog():
@@ -78,15 +83,22 @@ def _import_pyulog():
 
 class _TrackedFile:
     """A read-only file that remembers its last read, so a file cut inside a message is noticed
-    (pyulog stops there silently)."""
+    (pyulog stops there silently); ``progress(bytes read, bytes in all, "bytes")`` is called
+    every ``_PROGRESS_BYTES`` read."""
 
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, progress=None):
         self._f = open(path, "rb")  # noqa: SIM115 - pyulog closes it
         self.last_read = (0, 0)
+        self._progress = progress
+        self._size = os.fstat(self._f.fileno()).st_size if progress is not None else 0
+        self._next = _PROGRESS_BYTES
 
     def read(self, n=-1):
         b = self._f.read(n)
         self.last_read = (n, len(b))
+        if self._progress is not None and self._f.tell() >= self._next:
+            self._next = self._f.tell() + _PROGRESS_BYTES
+            self._progress(self._f.tell(), self._size, "bytes")
         return b
 
     def seek(self, *args):
@@ -179,9 +191,9 @@ def _data_bytes(ulog) -> int:
                for d in ulog.data_list)
 
 
-def _read_ulog(ULog, src: Path, topics):
+def _read_ulog(ULog, src: Path, topics, progress=None):
     """pyulog's reading of ``src``, what it printed (its warnings), and the tracked file."""
-    handle = _TrackedFile(src)
+    handle = _TrackedFile(src, progress)
     printed = io.StringIO()
     try:
         with contextlib.redirect_stdout(printed):
@@ -191,6 +203,145 @@ def _read_ulog(ULog, src: Path, topics):
     finally:
         handle.close()
     return ulog, printed.getvalue(), handle
+
+
+def _streams(ulog, warn) -> tuple[list, int]:
+    """Every logged stream as ``(topic, pyulog data, field names, {field: array}, timestamps [µs,
+    int64])``, the samples with an implausible timestamp left out, and how many were left out."""
+    instances: dict[str, set] = {}
+    for d in ulog.data_list:
+        instances.setdefault(d.name, set()).add(int(d.multi_id))
+    out = []
+    implausible = 0
+    seen_topic_fields: dict[str, tuple] = {}
+    for d in ulog.data_list:
+        topic = ulog_topic_name(d.name, d.multi_id, instances[d.name])
+        names = [f.field_name for f in d.field_data if f.field_name in d.data]
+        names += [k for k in d.data if k not in names]
+        names = [k for k in names if not k.startswith("_padding")]
+        if topic in seen_topic_fields and seen_topic_fields[topic] != tuple(names):
+            # the same topic and instance subscribed twice with different formats: keep them apart
+            k = 2
+            while f"{topic}~{k}" in seen_topic_fields:
+                k += 1
+            warn(f"{topic}: subscribed twice with different fields; the second is written to {topic}~{k}")
+            topic = f"{topic}~{k}"
+        seen_topic_fields[topic] = tuple(names)
+        keep = _plausible_us(d.data["timestamp"])
+        implausible += int(keep.size - keep.sum())
+        arrays = {k: (d.data[k].astype(np.uint8) if d.data[k].dtype == bool else d.data[k])[keep] for k in names}
+        out.append((topic, d, names, arrays, d.data["timestamp"][keep].astype(np.int64)))
+    return out, implausible
+
+
+def _texts(ulog) -> tuple[list, list, int]:
+    """The logged text messages (sorted by time) and the parameter changes, each as ``(timestamp
+    [µs], record)``, and how many were left out for an implausible timestamp."""
+    implausible = 0
+    logged = []
+    for m in ulog.logged_messages:
+        if not 0 <= int(m.timestamp) <= MAX_BOOT_US:
+            implausible += 1
+            continue
+        logged.append((int(m.timestamp), {"timestamp": int(m.timestamp), "level": int(m.log_level),
+                                          "level_name": _LEVELS.get(int(m.log_level) & 7, str(m.log_level)),
+                                          "message": str(m.message)}))
+    for tag, msgs in (ulog.logged_messages_tagged or {}).items():
+        for m in msgs:
+            if not 0 <= int(m.timestamp) <= MAX_BOOT_US:
+                implausible += 1
+                continue
+            logged.append((int(m.timestamp), {"timestamp": int(m.timestamp), "level": int(m.log_level),
+                                              "level_name": _LEVELS.get(int(m.log_level) & 7, str(m.log_level)),
+                                              "message": str(m.message), "tag": int(tag)}))
+    logged.sort(key=lambda x: x[0])
+    params = [(int(t), {"timestamp": int(t), "name": str(n), "value": v if isinstance(v, (int, float)) else str(v)})
+              for t, n, v in ulog.changed_parameters if 0 <= int(t) <= MAX_BOOT_US]
+    implausible += len(ulog.changed_parameters) - len(params)
+    return logged, params, implausible
+
+
+class UlogLog:
+    """A ULog read column-wise: every topic's times and values as numpy arrays, without a Python
+    record per sample (what ``livesweep inspect`` reads).
+
+    Topics, times and values are those :func:`convert_ulog` writes: ``/ulog/<topic>`` (the
+    multi-instance rule), ``/ulog/_logged_messages``, ``/ulog/_parameter_changes``; log time [ns]
+    (boot time shifted onto UTC when the log knows it).
+
+    Parameters
+    ----------
+    src : str or Path
+    partial : bool
+        As for :func:`convert_ulog`.
+    progress : callable, optional
+        ``progress(bytes read, bytes in all, "bytes")``, called now and then while pyulog reads
+        the file.
+
+    Attributes
+    ----------
+    topics : tuple of str
+    messages : int
+        Samples, text messages and parameter changes read.
+    warnings : tuple of str
+        What :func:`convert_ulog` would warn of about the streams (a topic subscribed twice).
+
+    Raises
+    ------
+    ConfigError, LogFormatError
+        As :func:`convert_ulog`.
+    """
+
+    def __init__(self, src, *, partial: bool = False, progress=None):
+        ULog = _import_pyulog()
+        src = Path(src)
+        ulog, _said, _handle = _read_ulog(ULog, src, None, progress)
+        size, read = src.stat().st_size, _data_bytes(ulog)
+        if ulog.file_corruption and read < MIN_RECORD_FRACTION * size and not partial:
+            raise LogFormatError(f"{src}: pyulog found corruption and read only {100 * read / size:.1f} % of the "
+                                 f"file ({read} of {size} bytes) as data samples (livesweep convert --partial "
+                                 "converts what is readable)")
+        warnings: list[str] = []
+        streams, _ = _streams(ulog, warnings.append)
+        logged, params, _ = _texts(ulog)
+        offset_us, _ = _utc_offset_us(ulog)
+        stamps = [ts for *_x, ts in streams] + [np.array([t for t, _ in x], np.int64) for x in (logged, params)]
+        if any(int(ts.min()) + offset_us < 0 for ts in stamps if ts.size):
+            offset_us = 0                         # what convert_ulog does: log time stays boot time
+        self._offset_us = offset_us
+        self._arrays = {topic: (arrays, ts) for topic, _d, _n, arrays, ts in streams}
+        self._names = {topic: names for topic, _d, names, _a, _t in streams}
+        self._texts = {}
+        for topic, rows in ((_LOG_TOPIC, logged), (_PARAM_TOPIC, params)):
+            if rows:
+                self._texts[topic] = (np.array([t for t, _ in rows], np.int64), [r for _, r in rows])
+        self.topics = tuple(self._arrays) + tuple(self._texts)
+        self.messages = sum(ts.size for ts in stamps)
+        self.warnings = tuple(warnings)
+
+    def times_ns(self, topic: str) -> np.ndarray:
+        """The log time [ns] of each sample of ``topic``, in file order (int64)."""
+        ts = self._arrays[topic][1] if topic in self._arrays else self._texts[topic][0]
+        return (ts + self._offset_us) * 1000
+
+    def first(self, topic: str) -> dict:
+        """The earliest sample of ``topic`` as ``{field: value}`` (the JSON record convert writes)."""
+        if topic in self._texts:
+            ts, rows = self._texts[topic]
+            return dict(rows[int(np.argmin(ts))])
+        arrays, ts = self._arrays[topic]
+        i = int(np.argmin(ts))
+        return {k: arrays[k][i].item() for k in self._names[topic]}
+
+    def column(self, topic: str, name: str) -> np.ndarray | None:
+        """Field ``name`` of ``topic`` as float64 values in file order; None when ``topic`` has no
+        such numeric field."""
+        if topic in self._texts:
+            return None
+        col = self._arrays[topic][0].get(name)
+        if col is None or col.dtype.kind not in "iuf":
+            return None
+        return col.astype(np.float64)
 
 
 def convert_ulog(src: Path, out: Path, *, topics=None, partial: bool = False, **options) -> ConversionResult:
@@ -230,59 +381,25 @@ def convert_ulog(src: Path, out: Path, *, topics=None, partial: bool = False, **
                              "what is readable")
 
     offset_us, time_source = _utc_offset_us(ulog)
-    instances: dict[str, set] = {}
-    for d in ulog.data_list:
-        instances.setdefault(d.name, set()).add(int(d.multi_id))
 
     with ConversionWriter(src, out, "ulog", _format_version(ulog)) as cw:
         w = cw.writer
         # -- gather every stream: (topic, field names, column lists, timestamps [µs])
         streams = []
-        implausible = 0
-        seen_topic_fields: dict[str, tuple] = {}
-        for d in ulog.data_list:
-            topic = ulog_topic_name(d.name, d.multi_id, instances[d.name])
-            names = [f.field_name for f in d.field_data if f.field_name in d.data]
-            names += [k for k in d.data if k not in names]
-            names = [k for k in names if not k.startswith("_padding")]
-            if topic in seen_topic_fields and seen_topic_fields[topic] != tuple(names):
-                # the same topic and instance subscribed twice with different formats: keep them apart
-                k = 2
-                while f"{topic}~{k}" in seen_topic_fields:
-                    k += 1
-                cw.warn(f"{topic}: subscribed twice with different fields; the second is written to {topic}~{k}")
-                topic = f"{topic}~{k}"
-            seen_topic_fields[topic] = tuple(names)
-            keep = _plausible_us(d.data["timestamp"])
-            implausible += int(keep.size - keep.sum())
-            arrays = {k: (d.data[k].astype(np.uint8) if d.data[k].dtype == bool else d.data[k])[keep] for k in names}
+        gathered, implausible = _streams(ulog, cw.warn)
+        for topic, d, names, arrays, ts in gathered:
             schema = {"type": "object", "title": f"ulog.{d.name}",
                       "properties": {k: _json_type(arrays[k].dtype) for k in names}}
             w.add_channel(topic, f"ulog.{d.name}", schema,
                           {"ulog_topic": d.name, "multi_id": str(int(d.multi_id)),
                            "timestamp": "us since boot", "fields": ",".join(names)})
-            ts = d.data["timestamp"][keep].astype(np.int64)
             cols = [arrays[k].tolist() for k in names]
             streams.append((topic, names, cols, ts))
             cw.messages_read += len(ts)
+        seen_topic_fields = {topic: tuple(names) for topic, _d, names, _a, _t in gathered}
 
-        logged = []
-        for m in ulog.logged_messages:
-            if not 0 <= int(m.timestamp) <= MAX_BOOT_US:
-                implausible += 1
-                continue
-            logged.append((int(m.timestamp), {"timestamp": int(m.timestamp), "level": int(m.log_level),
-                                              "level_name": _LEVELS.get(int(m.log_level) & 7, str(m.log_level)),
-                                              "message": str(m.message)}))
-        for tag, msgs in (ulog.logged_messages_tagged or {}).items():
-            for m in msgs:
-                if not 0 <= int(m.timestamp) <= MAX_BOOT_US:
-                    implausible += 1
-                    continue
-                logged.append((int(m.timestamp), {"timestamp": int(m.timestamp), "level": int(m.log_level),
-                                                  "level_name": _LEVELS.get(int(m.log_level) & 7, str(m.log_level)),
-                                                  "message": str(m.message), "tag": int(tag)}))
-        logged.sort(key=lambda x: x[0])
+        logged, params, dropped = _texts(ulog)
+        implausible += dropped
         if logged:
             w.add_channel(_LOG_TOPIC, "ulog.logged_message", {
                 "type": "object", "title": "ulog.logged_message",
@@ -290,9 +407,6 @@ def convert_ulog(src: Path, out: Path, *, topics=None, partial: bool = False, **
                                "level_name": {"type": "string"}, "message": {"type": "string"},
                                "tag": {"type": "integer"}}},
                 {"timestamp": "us since boot"})
-        params = [(int(t), {"timestamp": int(t), "name": str(n), "value": v if isinstance(v, (int, float)) else str(v)})
-                  for t, n, v in ulog.changed_parameters if 0 <= int(t) <= MAX_BOOT_US]
-        implausible += len(ulog.changed_parameters) - len(params)
         if params:
             w.add_channel(_PARAM_TOPIC, "ulog.parameter_change", {
                 "type": "object", "title": "ulog.parameter_change",
