@@ -24,6 +24,7 @@ estimates kept for inspection by ``keep_estimates``, the hand-over queue by ``qu
 
 from __future__ import annotations
 
+import bisect
 import logging
 import math
 import sys
@@ -60,6 +61,7 @@ ALL_PAIRS_EVERY = 5           # every pair's spectra go to the view every this m
 SWITCH_INTERVAL_S = 0.001     # the GIL changes hands at least this often while the monitor runs
 DIAGNOSE_AFTER_S = 5.0        # a map's signals that found nothing are named this long after the first frame [s of receive time]
 PACE_SPAN_S = 30.0            # the data's pace (data s per receive s) is measured over this much receive time [s]
+ON_GRID_S = 1e-7              # a sample time within this of a grid time is on it [s] (as the aligner has it)
 
 #: Counters whose growth is a ``link`` alert: (where, key, words).
 LINK_ANOMALIES = (
@@ -461,6 +463,7 @@ class MonitorPipeline:
                                             required_pairs=settings.required_pairs)
         self.test_points = _tracker(settings, self.names)
         self.test_points.source_rates = self._source_rates
+        self.test_points.link_counts = self._link_counts      # what the link lost while a test point is open
         self.verdict, self.verdict_reasons = None, ()          # the operator's verdict (test points)
         self._rx_to_data: tuple[int, float] | None = None       # (receive ns, data s) at the aligner's frontier
         self._rx_history: deque = deque()            # (receive ns, data s) of recent frontier moves (the data's pace)
@@ -722,8 +725,8 @@ class MonitorPipeline:
         """Every block the aligner has ready, now: what follows (a test-point event, a map alert)
         then sees the same samples whatever the batch sizes (a replay takes thousands of frames at
         once, a live link a few)."""
-        while (block := self.aligner.pop_ready()) is not None:
-            self._process_block(block, time.monotonic())
+        while (got := self._pop_ready())[0] is not None:
+            self._process_block(*got, time.monotonic())
 
     def _data_time(self, receive_ns: int) -> float | None:
         """The data time [s] of a frame without a usable stamp (a STATUSTEXT, a marker): the aligner's
@@ -825,8 +828,8 @@ class MonitorPipeline:
 
     def _process(self, t_rx: float) -> None:
         """Every block the aligner has ready, through the estimator tick by tick."""
-        while (block := self.aligner.pop_ready()) is not None:
-            self._process_block(block, t_rx)
+        while (got := self._pop_ready())[0] is not None:
+            self._process_block(*got, t_rx)
         self._flush_timeseries(t_rx)
         self._cause_rx = None
 
@@ -842,7 +845,51 @@ class MonitorPipeline:
                                  ["output" if x in self.s.outputs else "input" for x in self.names],
                                  units=[self.s.signals[x].units for x in self.names])
 
-    def _process_block(self, block, t_rx: float) -> None:
+    def _pop_ready(self) -> tuple:
+        """``(block, raw)``: the aligner's next block (None: none ready) and, on the vehicle clock,
+        per signal the times [s] of the samples it received for the block's grid samples (those in
+        ``(t_k - 1/fs, t_k]`` of each grid time ``t_k``), read before the aligner lets them go: a
+        test point counts the frames its signals lost from them. ``raw`` is None on receive time
+        (arrival times say nothing of what was sent)."""
+        al = self.aligner
+        if al.clock != "vehicle" or al.t0 is None:
+            return al.pop_ready(), None
+        fs = self.s.sample_rate_hz
+        after = al.t0 + (al.next_k - 1) / fs + ON_GRID_S          # the grid emitted so far ends here
+        held = {n: al.ch[n].t[bisect.bisect_right(al.ch[n].t, after):] for n in self.names}
+        block = al.pop_ready()
+        if block is None:
+            return None, None
+        n = block.values.shape[1]
+        t = block.t_s if block.t_s is not None else block.t0_s + np.arange(n) / fs
+        return block, self._raw_between(held, t[0] - 1.0 / fs + ON_GRID_S, t[-1] + ON_GRID_S)
+
+    @staticmethod
+    def _raw_between(raw: dict, lo: float, hi: float) -> dict:
+        """Each signal's sample times [s] in ``(lo, hi]`` (``raw``'s are sorted, as the aligner keeps them)."""
+        out = {}
+        for name, ts in raw.items():
+            ts = np.asarray(ts, float)
+            out[name] = ts[np.searchsorted(ts, lo, "right"):np.searchsorted(ts, hi, "right")]
+        return out
+
+    def _link_counts(self) -> dict:
+        """The live link's loss counters now, cumulative: datagrams the kernel dropped, MAVLink
+        sequence gaps of the system analysed (every system's until one is), frames the analysis
+        skipped and frames received. A test point's loss is their growth while it is open."""
+        drops = gaps = 0
+        system = self.aligner.system
+        for src in self.sources:
+            c = src.counts if isinstance(src.counts, dict) else {}
+            v = c.get("kernel_drops", 0)
+            drops += int(v) if isinstance(v, (int, float)) else 0
+            for key, v in (c.get("seq_gaps") or {}).items():
+                if system is None or str(key).split("/")[0] == str(system):
+                    gaps += int(v)
+        return {"kernel_drops": drops, "seq_gaps": gaps, "analysis_shed": int(self.analysis_shed),
+                "received": int(self.totals.frames)}
+
+    def _process_block(self, block, raw: dict | None, t_rx: float) -> None:
         self.totals.blocks += 1
         fs = self.s.sample_rate_hz
         n = block.values.shape[1]
@@ -870,8 +917,10 @@ class MonitorPipeline:
             k_tick = int(math.floor((self._next_tick - block.t0_s) * fs + GRID_TOL)) + 1
             stop = min(n, max(k_tick, start))
             if stop > start:
+                sub = None if raw is None else self._raw_between(raw, t[start] - 1.0 / fs + ON_GRID_S,
+                                                                 t[stop - 1] + ON_GRID_S)
                 self._test_point_records(self.test_points.block(float(t[start]), block.values[:, start:stop],
-                                                                block.valid[start:stop], t[start:stop]))
+                                                                block.valid[start:stop], t[start:stop], sub))
                 self.estimator.update(block.values[:, start:stop], block.valid[start:stop])
                 self._invalid_fed += int(np.sum(~block.valid[start:stop]))
                 for name in self.s.inputs:
@@ -1110,17 +1159,28 @@ class MonitorPipeline:
         t_prev, n_prev = self._status_frames
         self._status_frames = (now, self.totals.frames)
         cur = self.test_points.current
-        lost = sum(self._packets_lost().values()) + anomalies.get("kernel_drops", 0) + self.analysis_shed
+        # a frame the kernel dropped also leaves a MAVLink sequence gap: count the larger, not both
+        lost = max(sum(self._packets_lost().values()), anomalies.get("kernel_drops", 0)) + self.analysis_shed
         last = self.last_status
         self.status_line.update({
             "frames_per_s": (self.totals.frames - n_prev) / max(now - t_prev, 1e-9),
             "frames_lost": lost,
             "test_point": None if cur is None else f"TP{len(self.test_points.closed) + 1} {cur.swept_input or '?'}",
             "test_point_elapsed_s": None if cur is None or self._t_data is None else self._t_data - cur.start_s,
-            "verdict": self.verdict or "WAIT",
+            "test_point_loss": None if cur is None or cur.running is None or cur.running.loss is None
+            else cur.running.loss.fraction,
+            "verdict": self._verdict_label(),
             "sweep": {} if last is None else dict(last.sweep_frequency_rad_s),
             "alerts": self.alerts_raised,
         })
+
+    def _verdict_label(self) -> str:
+        """The operator's verdict as the last closed test point labels it ("NO-GO (link)", "GO
+        (marginal)"), else as it is ("WAIT")."""
+        closed = self.test_points.closed
+        if self.verdict in ("GO", "NO-GO") and closed and closed[-1]["verdict"] == self.verdict:
+            return closed[-1]["label"]
+        return self.verdict or "WAIT"
 
     def _payload(self, est: Estimate, rows) -> dict:
         st = est.status

@@ -14,16 +14,20 @@ The update is a dict; every key is optional (a missing or None value is shown as
     Label of the open test point (``"TP3 da"``); None when no test point is open.
 ``test_point_elapsed_s`` : float or None
     Time since that test point opened [s].
+``test_point_loss`` : float or None
+    Fraction of its frames that test point has lost so far (0..1; its last judgement's
+    :class:`~livesweep.spectral.test_point.DataLoss`); shown from 0.1 % on.
 ``verdict`` : str
-    ``"WAIT"``, ``"GO"`` or ``"NO-GO"``.
+    ``"WAIT"``, ``"GO"`` or ``"NO-GO"``, or the last test point's label (``"NO-GO (link)"``).
 ``sweep`` : dict of str -> float or None
     Current sweep frequency per swept input [rad/s] (None: not sweeping).
 ``alerts`` : int
     Alerts raised so far [count].
 
-Example line::
+Example lines::
 
     54 fr/s | lost 0 | TP2 da 01:42 | NO-GO | da 3.2 rad/s | 3 alerts
+    41 fr/s | lost 14652 | TP3 da 01:10 27 % lost | NO-GO (link) | da 9.5 rad/s | 5 alerts
 """
 
 from __future__ import annotations
@@ -39,7 +43,8 @@ from livesweep.monitor.text import omega_text
 __all__ = ["format_status", "StatusLine", "STATUS_KEYS"]
 
 #: The keys :func:`format_status` reads.
-STATUS_KEYS = ("frames_per_s", "frames_lost", "test_point", "test_point_elapsed_s", "verdict", "sweep", "alerts")
+STATUS_KEYS = ("frames_per_s", "frames_lost", "test_point", "test_point_elapsed_s", "test_point_loss", "verdict",
+               "sweep", "alerts")
 
 
 def _num(x) -> float | None:
@@ -69,8 +74,8 @@ def format_status(info: dict, width: int | None = None) -> str:
     Returns
     -------
     str
-        ``"<fps> fr/s | lost <n> | <test point> <mm:ss> | <verdict> | <input> <omega> rad/s ... | <n> alerts"``,
-        no line break.
+        ``"<fps> fr/s | lost <n> | <test point> <mm:ss> [<p> % lost] | <verdict> | <input> <omega> rad/s ... |
+        <n> alerts"``, no line break.
     """
     fps = _num(info.get("frames_per_s"))
     lost = _num(info.get("frames_lost"))
@@ -79,7 +84,11 @@ def format_status(info: dict, width: int | None = None) -> str:
     tp = info.get("test_point")
     if tp:
         el = _num(info.get("test_point_elapsed_s"))
-        parts.append(f"{tp} {_clock(el)}" if el is not None else str(tp))
+        text = f"{tp} {_clock(el)}" if el is not None else str(tp)
+        loss = _num(info.get("test_point_loss"))
+        if loss is not None and loss >= 0.0005:          # what rounds to 0.0 % is not said
+            text += f" {100 * loss:.0f} % lost" if loss >= 0.01 else f" {100 * loss:.1f} % lost"
+        parts.append(text)
     else:
         parts.append("no test point")
     parts.append(str(info.get("verdict") or "-"))

@@ -33,6 +33,15 @@ last running one says why. The monitor closes a test point whose telemetry stopp
 unless its sweep was already over (the autopilot's chirp had ended, or a detected sweep's input had
 been quiet for a while): then it is judged on what it holds.
 Everything depends on the frames and samples alone, so a replay reproduces the test points exactly.
+
+**Data loss.** Each block comes with the times of the samples each signal brought to it (on the
+vehicle clock), so a test point knows, over its own span, how many frames each of its signals
+missed (:func:`~livesweep.spectral.test_point.frames_missing`) and how many of its grid samples
+fell in gaps; a live monitor also reads its link counters (kernel drops, MAVLink sequence gaps,
+frames the analysis skipped) when the test point opens and each time it is judged. The verdict says
+the loss first when it is large enough to matter (:class:`~livesweep.spectral.test_point.DataLoss`);
+the counts from the samples are what a replay of the recording finds again, the link counters are
+the live run's alone (a file has no link).
 """
 
 from __future__ import annotations
@@ -48,7 +57,7 @@ from livesweep.monitor.systemid import SAME_START_S, SystemIdWatch, better_injec
 from livesweep.monitor.systemid import TOPICS as SYSTEMID_TOPICS
 from livesweep.monitor.vehicle import VehicleInfo, axis_name
 from livesweep.spectral.injection import SweepInjection
-from livesweep.spectral.test_point import TestPointJudgement, judge_test_point
+from livesweep.spectral.test_point import DataLoss, TestPointJudgement, judge_test_point
 from livesweep.telemetry.frames import Frame
 
 __all__ = ["TestPointEvent", "TestPoint", "TestPointTracker", "SOURCES", "MARKER_TOPIC", "LOST_TOPIC",
@@ -145,6 +154,8 @@ class TestPoint:
     t0: list = field(default_factory=list)       # per kept block: start time [s]
     values: list = field(default_factory=list)   # per kept block: (n_signals, n) samples
     valid: list = field(default_factory=list)
+    raw: list = field(default_factory=list)      # per block: {signal: times of the samples it received [s]}
+    link0: dict | None = None                    # the link counters when it opened (a live monitor)
     pre: np.ndarray | None = None                # the samples before it (n_signals, n_pre)
     next_judge_s: float = math.inf               # data time of its next judgement while open
     judgement: TestPointJudgement | None = None
@@ -184,7 +195,7 @@ class TestPoint:
             out.update(pairs=d["pairs"], missing=d["missing"], reasons=d["reasons"],
                        excited_fraction=d["excited_fraction"], duration_s=d["duration_s"],
                        judged_band_rad_s=d["judged_band_rad_s"], swept_band_rad_s=d["swept_band_rad_s"],
-                       excitation=d["excitation"], progress=j.progress())
+                       excitation=d["excitation"], progress=j.progress(), loss_fraction=d["loss_fraction"])
             if state == "closed" and out["verdict"] == j.verdict:
                 out.update(label=j.label, marginal=j.marginal)
         if state == "closed":
@@ -312,11 +323,15 @@ class TestPointTracker:
     source_rates : callable, optional
         ``source_rates() -> {signal: Hz}``: the rate each signal arrives at (a pair whose signals
         arrive too slowly for the top of the band is told so).
+    link_counts : callable, optional
+        ``link_counts() -> {counter: cumulative count}``: the live link's loss counters
+        (``kernel_drops``, ``seq_gaps``, ``analysis_shed``, ``received``), read when a test point
+        opens and when it is judged; None for a file.
     """
 
     def __init__(self, names, inputs, outputs, sample_rate_hz: float, band_rad_s, *, sources=SOURCES,
                  axes: dict | None = None, required: dict | None = None, min_duration_s: float = 10.0,
-                 references: dict | None = None, source_rates=None):
+                 references: dict | None = None, source_rates=None, link_counts=None):
         self.names, self.inputs, self.outputs = tuple(names), tuple(inputs), tuple(outputs)
         self.fs, self.band = float(sample_rate_hz), (float(band_rad_s[0]), float(band_rad_s[1]))
         self.sources = tuple(sources)
@@ -325,13 +340,14 @@ class TestPointTracker:
         self.min_duration_s = float(min_duration_s)
         self.references = dict(references or {})     # input -> its logged injection
         self.source_rates = source_rates
+        self.link_counts = link_counts
         self.vehicle = VehicleInfo()                 # parameters, frame, SystemID settings of the vehicle
         self.unfit: str = ""                         # why the map does not fit the vehicle (judged NO-GO)
         self.current: TestPoint | None = None
         self.closing: list[TestPoint] = []           # ended, waiting for their last samples
         self.closed: list[dict] = []                 # records of the closed test points, in order
         self.explicit = False                        # an autopilot or marker event was seen
-        self._pre = deque()                          # (t0, values, valid) blocks of the recent past
+        self._pre = deque()                          # (t0, values, valid, raw) blocks of the recent past
         self._sweep = _SweepDetector(self.inputs, self.fs) if "sweep" in self.sources else None
         self._systemid = SystemIdWatch()             # the analysed vehicle's SystemID runs
         self._ground_stations: set = {GCS_SYSID}     # systems whose HEARTBEAT says MAV_TYPE_GCS
@@ -479,28 +495,34 @@ class TestPointTracker:
         tp = TestPoint(ev.t_s, ev.source, ev.swept_input, ev.note, injection=ev.injection, axis=ev.axis,
                        unjudged=self._unjudged(ev))
         before = []
-        for t0, values, valid in self._pre:      # split the recent samples at the start
+        for t0, values, valid, raw in self._pre:      # split the recent samples at the start
             k = int(np.clip(math.ceil((ev.t_s - t0) * self.fs - GRID_TOL), 0, values.shape[1]))
             before.append(values[:, :k])
             if k < values.shape[1]:
                 tp.t0.append(t0 + k / self.fs)
                 tp.values.append(values[:, k:])
                 tp.valid.append(valid[k:])
+                if raw is not None:
+                    tp.raw.append(raw)           # counted over its span only (DataLoss.measure)
+        if self.link_counts is not None:
+            tp.link0 = dict(self.link_counts())
         tp.pre = np.concatenate(before, axis=1)[:, -int(round(PRE_TEST_S * self.fs)):] if before else None
         tp.next_judge_s = ev.t_s + max(self.min_duration_s, JUDGE_EVERY_S)
         self.current = tp
         return [(ev.t_s, tp.record("open"))]
 
     def block(self, t0: float, values: np.ndarray, valid: np.ndarray,
-              t: np.ndarray | None = None) -> list[tuple[float, dict]]:
+              t: np.ndarray | None = None, raw: dict | None = None) -> list[tuple[float, dict]]:
         """Take one aligned block (start time [s], (n_signals, n), (n,), and optionally its sample
-        times [s], :attr:`AlignedBlock.t_s`); returns ``(data time [s], record)`` of the test
-        points it opened (sweep detection), judged while open, or closed."""
+        times [s], :attr:`AlignedBlock.t_s`, and per signal the times [s] of the samples it
+        received for the block's grid samples, those within a grid period before each: what its
+        data lost is counted from them); returns ``(data time [s], record)`` of the test points it
+        opened (sweep detection), judged while open, or closed."""
         out = []
         n = values.shape[1]
         if t is None:
             t = t0 + np.arange(n) / self.fs
-        self._pre.append((t0, values, valid))    # first: a test point opened by this block splits it
+        self._pre.append((t0, values, valid, raw))    # first: a test point opened by this block splits it
         keep_from = t0 - PRE_TEST_S - _MAX_DETECTION_S  # by time, so what is kept does not depend on block sizes
         while self._pre and self._pre[0][0] + self._pre[0][1].shape[1] / self.fs < keep_from:
             self._pre.popleft()
@@ -516,6 +538,8 @@ class TestPointTracker:
                 tp.t0.append(float(t[start]))
                 tp.values.append(values[:, start:stop])
                 tp.valid.append(valid[start:stop])
+                if raw is not None:
+                    tp.raw.append(raw)
         for tp in list(self.closing):
             if t[-1] >= tp.end_s:
                 out += self._close(tp)
@@ -594,10 +618,12 @@ class TestPointTracker:
             swept = tp.swept_input = self.inputs[int(np.nanargmax(ratios))]
         last = tp.t0[0] + (values.shape[1] - 1) / self.fs
         rates = self.source_rates() if self.source_rates is not None else None
-        j = judge_test_point(values, self.names, self.fs, swept, self.required_outputs(swept), self.band,
+        outputs = self.required_outputs(swept)
+        j = judge_test_point(values, self.names, self.fs, swept, outputs, self.band,
                              valid=valid, references=self.references, injection=tp.injection,
                              elapsed_s=last - tp.start_s, final=final, min_duration_s=self.min_duration_s,
-                             source_rates_hz=rates)
+                             source_rates_hz=rates, loss=self._loss(tp, (swept, self.references.get(swept), *outputs),
+                                                                    valid, last, rates))
         if final:
             tp.judgement = j
         else:
@@ -605,3 +631,19 @@ class TestPointTracker:
         self.judgements[round(tp.start_s, 6)] = j
         while len(self.judgements) > 10:
             self.judgements.pop(next(iter(self.judgements)))
+
+    def _loss(self, tp: TestPoint, signals, valid: np.ndarray, last_s: float, rates: dict | None) -> DataLoss:
+        """What ``tp`` lost of the data of ``signals`` (the swept input, its reference, the outputs
+        judged) from its first grid sample to ``last_s`` [s]: the frames missing from each
+        signal's time stamps, the grid samples in gaps and, live, the link counters since it opened."""
+        lo = tp.t0[0] - (1 - GRID_TOL) / self.fs     # a grid sample stands for the period up to it
+        hi = last_s + GRID_TOL / self.fs
+        names = [s for s in dict.fromkeys(signals) if s is not None]
+        times = {} if not tp.raw else {s: np.concatenate([r[s] for r in tp.raw if s in r] or [np.empty(0)])
+                                        for s in names}
+        spacings = {s: 1.0 / r for s, r in (rates or {}).items() if r}
+        link = None
+        if self.link_counts is not None and tp.link0 is not None:
+            now = self.link_counts()
+            link = {k: now.get(k, 0) - tp.link0.get(k, 0) for k in now}
+        return DataLoss.measure(times, lo, hi, valid, spacings_s=spacings, link=link)

@@ -191,7 +191,8 @@ def markdown_test_points(entries: Sequence[tuple[int, dict]], t_s: float) -> str
         ``{"state": "open"|"closed"|..., "start_s", "end_s" (None while open), "source",
         "swept_input", "verdict", "pairs": [{"output", "input", "adequate_fraction",
         "band_rad_s": [lo, hi] or None, "coherence": "ordinary"|"partial"}], "missing": [str, ...]}``
-        (optionally ``"required_fraction"``, default 0.6).
+        (optionally ``"required_fraction"``, default 0.6; ``"label"``, the verdict as shown: "NO-GO
+        (link)"; ``"loss_fraction"``, the fraction of its frames lost, said from 0.1 % on).
     t_s : float
         Flight time now [s] (the open test point's elapsed time).
     """
@@ -221,8 +222,11 @@ def _tp_section(number: int, tp: dict, t_s: float) -> list[str]:
         span = (f"{start:.1f} – {end:.1f} s" if max(abs(start), abs(end)) < EPOCH_MIN_S
                 else f"{time_text(start)} – {time_text(end)}")
         when = f"{span} ({duration_text(end - start)})"
-    head = (f"**Test point {number} ({md_cell(state)}): {md_cell(tp.get('verdict') or '?')}**, sweeping "
-            f"{md_cell(swept)}, {when}, found by {md_cell(tp.get('source') or '?')}")
+    head = (f"**Test point {number} ({md_cell(state)}): {md_cell(tp.get('label') or tp.get('verdict') or '?')}**, "
+            f"sweeping {md_cell(swept)}, {when}, found by {md_cell(tp.get('source') or '?')}")
+    lost = _num(tp.get("loss_fraction"))
+    if lost is not None and lost >= 0.0005:        # what rounds to 0.0 % is not said
+        head += f"; **{percent(lost)} of its frames lost**"
     required = _num(tp.get("required_fraction"))
     required = DEFAULT_REQUIRED_FRACTION if required is None else required
     missing = [str(m) for m in (tp.get("missing") or [])]
@@ -251,7 +255,8 @@ def _tp_section(number: int, tp: dict, t_s: float) -> list[str]:
 
 def test_point_line(number: int, tp: dict) -> str:
     """One closed test point in a line: ``"TP1 roll (autopilot, 78.6 s - 128.6 s): GO; p/roll 100 %
-    adequate of 3.14 – 75.4 rad/s (+40 points)"``, and what a NO-GO still needs."""
+    adequate of 3.14 – 75.4 rad/s (+40 points)"``, what its data lost ("27 % of its frames lost")
+    and what a NO-GO still needs."""
     start, end = _num(tp.get("start_s")), _num(tp.get("end_s"))
     span = f"{time_text(start)} - {time_text(end)}" if start is not None and end is not None else "?"
     head = f"TP{number} {tp.get('swept_input') or '?'} ({tp.get('source', '?')}, {span}): {tp.get('label') or tp.get('verdict')}"
@@ -264,6 +269,9 @@ def test_point_line(number: int, tp: dict) -> str:
             parts.append(f"{p.get('output')}/{p.get('input')} {percent(frac, DEFAULT_REQUIRED_FRACTION)} adequate{where} "
                          f"({points(frac, DEFAULT_REQUIRED_FRACTION)})")
     line = head + ("; " + ", ".join(parts) if parts else "")
+    lost = _num(tp.get("loss_fraction"))
+    if lost is not None and lost >= 0.0005:        # what rounds to 0.0 % is not said
+        line += f"; {percent(lost)} of its frames lost"
     if tp.get("verdict") != "GO" and tp.get("missing"):
         line += "; needs: " + "; ".join(str(m) for m in tp["missing"][:3])
     return line

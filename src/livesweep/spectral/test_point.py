@@ -33,6 +33,12 @@ collects its aligned samples and, while it runs and when it closes, asks :func:`
 * **Running and final.** While the test point runs it is judged over the band swept so far ("GO so
   far: 0.5-2.9 Hz of 0.5-12 Hz swept"); the closing verdict is judged once, over the whole test
   point and the whole band.
+* **Data loss first.** Frames lost on the way (a radio, a full socket buffer, an analysis that
+  skipped frames to keep up) leave holes the monitor's grid fills by interpolation; where a fill
+  cannot follow the signal it lowers the coherence (:data:`LOSS_REASON_FRACTION`). The loss of the
+  test point's own signals over its own span (:class:`DataLoss`) is then the verdict's first
+  reason, and a NO-GO on a loss of :data:`LOSS_LINK_FRACTION` or more reads "NO-GO (link)": it says
+  nothing of the sweep.
 * **GO** when the test point lasted ``min_duration_s``, the input was excited and every required
   pair is adequate over ``required_fraction`` (60 %) of the band; otherwise **NO-GO**, with what is
   missing in words an operator can act on: which band of which pair, and for a gap at the bottom
@@ -45,7 +51,7 @@ Pure: arrays in, a frozen :class:`TestPointJudgement` out.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -60,7 +66,8 @@ from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW
 from livesweep.spectral.windows import longest_window_samples
 
 __all__ = ["PairJudgement", "TestPointJudgement", "judge_test_point", "REQUIRED_FRACTION", "LOW_FREQUENCY_PERIODS",
-           "NYQUIST_FRACTION", "MARGINAL_SIGMAS", "coherence_sigma", "shows_up_to_rad_s"]
+           "NYQUIST_FRACTION", "MARGINAL_SIGMAS", "coherence_sigma", "shows_up_to_rad_s", "DataLoss", "frames_missing",
+           "LOSS_REASON_FRACTION", "LOSS_LINK_FRACTION"]
 
 #: Periods of its lowest frequency a sweep needs to resolve it (docs/method.md §2.5, T_rec >= 4-5 T_max).
 LOW_FREQUENCY_PERIODS = 4.0
@@ -77,6 +84,29 @@ _MIN_SWEPT_DECADES = 0.05
 #: records, eight seeds), its error was 1.5 of the sigma its random error predicts (and biased
 #: +0.5 of it). tests/test_judgement.py judges the bracket on another system and other seeds.
 MARGINAL_SIGMAS = 1.5
+
+# Lost frames and the coherence. The monitor's grid fills a lost frame by interpolating across it
+# (holes up to max(0.1 s, 1.5 sample periods); longer ones are gaps the spectra leave out, which
+# costs averages instead). Where a fill cannot follow the signal (above about a radian per filled
+# stretch: 20 rad/s across a 50 ms hole) a filled sample is about as wrong as the signal is large.
+# A fraction L of a signal's samples so filled adds an error uncorrelated with the signal, of about
+# L / (1 - L) of the power of the samples kept; with the input and the output in different messages
+# (lost independently) the coherence reads gamma^2 / ((1 + L / (1 - L))^2) = (1 - L)^2 gamma^2 there.
+# (A burst that takes every message at once fills both the same way and biases less: the thresholds
+# are for the independent case, a radio's.)
+# Two thresholds follow from the adequacy rule (gamma^2 >= MIN_COHERENCE, eps_r <= MAX_RANDOM_ERROR),
+# none from a test:
+#: A loss from this fraction of a test point's frames is the verdict's first reason: at the coherence
+#: threshold, its bias (1 - (1 - L)^2) gamma^2 reaches the coherence estimate's own random error
+#: there, ``2 gamma^2 eps_r sqrt(1 - gamma^2)`` with eps_r at its limit (:func:`coherence_sigma`):
+#: L = 1 - sqrt(1 - 2 * 0.2 * sqrt(0.4)) = 13.6 %. Below it the loss moves a coherence less than the
+#: verdict's own uncertainty does (it is still said, last).
+LOSS_REASON_FRACTION = 1.0 - math.sqrt(1.0 - 2.0 * MAX_RANDOM_ERROR * math.sqrt(1.0 - MIN_COHERENCE))
+#: A NO-GO on a loss from this fraction reads "NO-GO (link)": (1 - L)^2 = MIN_COHERENCE, L = 22.5 %, so
+#: even a pair of perfect coherence reads no better than the threshold where the fills cannot follow
+#: the sweep; such a NO-GO says nothing of the sweep. (A GO stays a GO: a loss lowers the coherence,
+#: never raises it.)
+LOSS_LINK_FRACTION = 1.0 - math.sqrt(MIN_COHERENCE)
 
 
 def shows_up_to_rad_s(rate_hz: float) -> float:
@@ -96,6 +126,122 @@ def coherence_sigma(coherence: np.ndarray, random_error: np.ndarray) -> np.ndarr
     e = np.asarray(random_error, float)
     with np.errstate(invalid="ignore"):
         return np.where(np.isfinite(e), 2.0 * g * np.where(np.isfinite(e), e, 0.0) * np.sqrt(1.0 - g), np.nan)
+
+
+def frames_missing(times, lo: float, hi: float, spacing_s: float | None = None) -> tuple[int, int]:
+    """``(frames received, frames missing)`` of one signal over the span ``(lo, hi]`` [s] from its
+    sample times: a hole of ``d`` between two samples misses ``round(d / dt) - 1`` frames, ``dt``
+    being the signal's own spacing there (the median of its spacings: a loss in bursts, or random
+    and under half, does not move it; time-stamp jitter rounds away); so do the stretches from the
+    span's ends to its first and last sample. ``spacing_s``: the spacing [s] when the span holds
+    fewer than three samples (None: nothing can be told then)."""
+    t = np.sort(np.asarray(times, float).ravel())
+    t = t[(t > lo) & (t <= hi)]
+    d = np.diff(t)
+    d = d[d > 0]
+    dt = float(np.median(d)) if d.size >= 2 else (spacing_s or 0.0)
+    if not (dt > 0 and math.isfinite(dt)):
+        return int(t.size), 0
+    if t.size == 0:
+        return 0, int(round((hi - lo) / dt))
+    ends = np.array([t[0] - lo, hi - t[-1]])
+    missing = np.maximum(np.rint(d / dt) - 1, 0).sum() + np.maximum(np.rint(ends / dt) - 1, 0).sum()
+    return int(t.size), int(missing)
+
+
+#: The link counters a live monitor reads while a test point is open, and how a reason names them.
+LINK_COUNTERS = (("kernel_drops", "datagrams dropped by the kernel (socket buffer full: this computer did not read "
+                                  "them in time)"),
+                 ("seq_gaps", "frames missing by MAVLink sequence number (an estimate: losses before this "
+                              "computer count too)"),
+                 ("analysis_shed", "frames skipped by the analysis to keep up (recorded all the same)"))
+
+
+@dataclass(frozen=True)
+class DataLoss:
+    """What a test point lost of its data, over its own span.
+
+    Attributes
+    ----------
+    fraction : float
+        The loss judged, 0..1: the largest of the fraction of frames missing from any of the
+        test point's signals and the fraction of its grid samples in gaps (no data at all).
+    signal : str or None
+        The signal that lost the most frames (None: the grid's gaps, or the link's counters, said more).
+    missing, expected : int
+        Frames missing of that signal, and frames it should have had (received + missing); grid
+        samples in gaps and all of them when ``signal`` is None and ``measured`` is ``"grid"``;
+        frames lost and received on the link when ``"link"``.
+    measured : str
+        ``"signal"`` (from the signal's time stamps), ``"grid"`` (the grid's gaps) or ``"link"``
+        (the link's counters: a map on receive time has no stamps to count from).
+    link : dict of str -> int
+        The live link's counters over the time the test point was open (:data:`LINK_COUNTERS`:
+        ``kernel_drops``, ``seq_gaps``, ``analysis_shed``); empty for a file (a replay has no link).
+    """
+
+    fraction: float
+    signal: str | None = None
+    missing: int = 0
+    expected: int = 0
+    measured: str = "signal"
+    link: dict = field(default_factory=dict, hash=False)
+
+    @staticmethod
+    def measure(times: dict, lo: float, hi: float, valid=None, *, spacings_s: dict | None = None,
+                link: dict | None = None) -> "DataLoss":
+        """The loss of a test point over ``(lo, hi]`` [s, data time].
+
+        Parameters
+        ----------
+        times : dict of str -> array
+            Per signal judged, the times of the samples it received [s] (empty dict: not known,
+            a map on receive time).
+        lo, hi : float
+            The span: from one grid period before its first grid sample to its last.
+        valid : array of bool, optional
+            Its grid samples (False in a gap).
+        spacings_s : dict of str -> float, optional
+            Each signal's spacing [s], for a signal with fewer than three samples in the span.
+        link : dict, optional
+            The link counters over the time it was open (:data:`LINK_COUNTERS`, and ``received``:
+            frames received then).
+        """
+        link = {k: int(v) for k, v in (link or {}).items() if v}
+        best = DataLoss(0.0, link={k: v for k, v in link.items() if k != "received"})
+        for name, t in times.items():
+            got, miss = frames_missing(t, lo, hi, (spacings_s or {}).get(name))
+            if got + miss and miss / (got + miss) > best.fraction:
+                best = DataLoss(miss / (got + miss), name, miss, got + miss, "signal", best.link)
+        if valid is not None and np.size(valid):
+            bad = int(np.size(valid) - np.count_nonzero(valid))
+            if bad / np.size(valid) > best.fraction:
+                best = DataLoss(bad / np.size(valid), None, bad, int(np.size(valid)), "grid", best.link)
+        if not times and link:             # no stamps to count from: the link's own count of what it lost
+            lost = max(link.get("kernel_drops", 0), link.get("seq_gaps", 0))
+            seen = link.get("received", 0) + lost
+            if seen:
+                frac = 1.0 - (1.0 - lost / seen) * (1.0 - min(link.get("analysis_shed", 0) / max(seen - lost, 1), 1.0))
+                if frac > best.fraction:
+                    best = DataLoss(frac, None, lost + link.get("analysis_shed", 0), seen, "link", best.link)
+        return best
+
+    def describe(self) -> str:
+        """``"27 % of the frames of p lost during this test point (1 913 of 7 101, missing from its
+        time stamps)"``."""
+        pct = _percent(self.fraction, LOSS_REASON_FRACTION)
+        if self.measured == "signal":
+            return (f"{pct} of the frames of {self.signal} lost during this test point ({self.missing} of "
+                    f"{self.expected}, missing from its time stamps)")
+        if self.measured == "grid":
+            return (f"{pct} of this test point's samples in gaps ({self.missing} of {self.expected}: no data, "
+                    f"frames lost on the link or a signal silent)")
+        return f"{pct} of the frames on the link lost while this test point was open ({self.missing} of {self.expected})"
+
+    def cause(self) -> str:
+        """What the live link counted while the test point was open, or "" (nothing, or a file)."""
+        parts = [f"{self.link[k]} {words}" for k, words in LINK_COUNTERS if self.link.get(k)]
+        return "on the link while this test point was open: " + "; ".join(parts) if parts else ""
 
 
 @dataclass(frozen=True)
@@ -172,6 +318,8 @@ class TestPointJudgement:
         The lowest frequency the record's length resolves [rad/s].
     injection : SweepInjection or None
         What the autopilot was told to inject, when known.
+    loss : DataLoss or None
+        What the test point lost of its data over its span; None when not measured.
     """
 
     __test__ = False                  # not a pytest class, whatever its name says
@@ -190,11 +338,18 @@ class TestPointJudgement:
     excitation: str = "input"
     marginal: bool = False
     injection: SweepInjection | None = None
+    loss: DataLoss | None = None
+
+    @property
+    def link_bound(self) -> bool:
+        """A NO-GO on a loss of :data:`LOSS_LINK_FRACTION` or more: it says nothing of the sweep."""
+        return self.verdict == "NO-GO" and self.loss is not None and self.loss.fraction >= LOSS_LINK_FRACTION
 
     @property
     def label(self) -> str:
-        """``GO``, ``NO-GO``, ``GO (marginal)``, ``GO so far``, ..."""
-        return self.verdict + ("" if self.final else " so far") + (" (marginal)" if self.marginal else "")
+        """``GO``, ``NO-GO``, ``GO (marginal)``, ``GO so far``, ``NO-GO (link)``, ..."""
+        tag = " (link)" if self.link_bound else " (marginal)" if self.marginal else ""
+        return self.verdict + ("" if self.final else " so far") + tag
 
     def progress(self) -> str:
         """``"0.5-2.9 Hz of 0.5-12 Hz swept"``: how much of the judged band the sweep has covered."""
@@ -224,6 +379,7 @@ class TestPointJudgement:
             "excited_fraction": None if self.excited_fraction is None else round(self.excited_fraction, 4),
             "missing": list(self.missing), "reasons": list(self.reasons),
             "resolvable_from_rad_s": round(self.resolvable_from_rad_s, 4),
+            "loss_fraction": None if self.loss is None else round(self.loss.fraction, 4),
         }
 
 
@@ -341,7 +497,7 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
                      valid: np.ndarray | None = None, references: dict | None = None,
                      injection: SweepInjection | None = None, elapsed_s: float | None = None, final: bool = True,
                      required_fraction: float = REQUIRED_FRACTION, min_duration_s: float = 10.0,
-                     source_rates_hz: dict | None = None) -> TestPointJudgement:
+                     source_rates_hz: dict | None = None, loss: DataLoss | None = None) -> TestPointJudgement:
     """The verdict on a test point from its aligned samples.
 
     Parameters
@@ -373,6 +529,10 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
     source_rates_hz : dict of str -> float, optional
         The rate each signal arrives at [Hz]: a pair whose signals arrive too slowly to show the
         top of the band is told so.
+    loss : DataLoss, optional
+        What the test point lost of its data (:meth:`DataLoss.measure`): from
+        :data:`LOSS_REASON_FRACTION` on the first reason (and the first thing a NO-GO needs), a
+        NO-GO from :data:`LOSS_LINK_FRACTION` on labelled "NO-GO (link)"; a smaller loss is said last.
 
     Returns
     -------
@@ -414,10 +574,11 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
     j_hi = hi
     if not final:
         if swept is None or math.log10(swept[1] / max(swept[0], lo)) < _MIN_SWEPT_DECADES:
-            return TestPointJudgement(swept_input, "NO-GO", (), None, ("nothing swept yet",),
-                                      (f"{swept_input}: nothing of {lo:.3g}-{hi:.3g} rad/s swept yet",), duration,
+            why, needs = _with_loss([f"{swept_input}: nothing of {lo:.3g}-{hi:.3g} rad/s swept yet"],
+                                    ["nothing swept yet"], False, loss)
+            return TestPointJudgement(swept_input, "NO-GO", (), None, needs, why, duration,
                                       resolvable, final=False, band_rad_s=(lo, hi), swept_rad_s=None,
-                                      excitation=excitation, injection=injection)
+                                      excitation=excitation, injection=injection, loss=loss)
         j_hi = swept[1]
     band_text = f"{lo:.3g}-{j_hi:.3g} rad/s"
 
@@ -486,7 +647,35 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
         failing = [p for p in pairs if p.adequate_fraction < required_fraction]
         marginal = (duration >= min_duration_s and excited_ok and bool(failing)
                     and all(p.marginal(required_fraction) for p in failing))
+    reasons, missing = _with_loss(reasons, [] if go else missing, go, loss)
     return TestPointJudgement(swept_input, "GO" if go else "NO-GO", tuple(pairs), excited,
-                              () if go else tuple(missing), tuple(reasons), duration, resolvable, final=final,
+                              missing, reasons, duration, resolvable, final=final,
                               band_rad_s=(lo, hi), swept_rad_s=swept, excitation=excitation, marginal=marginal,
-                              injection=injection)
+                              injection=injection, loss=loss)
+
+
+def _with_loss(reasons: list, missing: list, go: bool, loss: DataLoss | None) -> tuple[tuple, tuple]:
+    """The reasons and what a NO-GO needs, with the data's loss said: first from
+    :data:`LOSS_REASON_FRACTION` on (what the link counted right after it), else last."""
+    if loss is None or not loss.missing:
+        return tuple(reasons), tuple(missing)
+    text, cause = loss.describe(), loss.cause()
+    if loss.fraction < LOSS_REASON_FRACTION:
+        said = [f"{text}: too little to move a coherence by more than its own random error (below "
+                f"{100 * LOSS_REASON_FRACTION:.1f} %)",
+                *([cause] if cause else [])]
+        return (*reasons, *said), tuple(missing)
+    if go:
+        first = f"{text}: adequate all the same (a loss lowers the coherence, it never raises it)"
+    elif loss.fraction >= LOSS_LINK_FRACTION:
+        first = f"{text}: the verdict reflects the link, not the sweep"
+    else:
+        first = (f"{text}: enough to lower a coherence by more than its random error; the NO-GO may be the "
+                 f"link's, not the sweep's")
+    if not go:
+        shed = loss.link.get("analysis_shed", 0)
+        missing = [f"a link that keeps the frames before this sweep is flown again ({_percent(loss.fraction)} "
+                   f"lost: see the troubleshooting page, frames lost on the link)"
+                   + (f"; the recording holds the {shed} frames the analysis skipped: replay it "
+                      f"(livesweep replay) for the verdict on them" if shed else ""), *missing]
+    return (first, *([cause] if cause else []), *reasons), tuple(missing)

@@ -90,7 +90,7 @@ RESULT_SCHEMAS: dict[str, dict] = {
             "axis": {"type": ["integer", "null"], "description": "ArduPilot SystemID axis (SID_AXIS)"},
             "note": {"type": "string"}, "end_note": {"type": "string"},
             "verdict": {"type": "string", "enum": ["GO", "NO-GO"]},
-            "label": {"type": "string", "description": "the verdict as shown: GO, NO-GO, GO (marginal)"},
+            "label": {"type": "string", "description": "the verdict as shown: GO, NO-GO, GO (marginal), NO-GO (link)"},
             "marginal": {"type": "boolean", "description": "a deciding rule within its random error of the threshold"},
             "running": {"type": ["string", "null"], "description": "the last running verdict (GO so far, ...)"},
             "injection": {"type": ["object", "null"], "description": "the sweep the autopilot was told to inject",
@@ -118,6 +118,11 @@ RESULT_SCHEMAS: dict[str, dict] = {
             "reasons": {"type": "array", "items": {"type": "string"}},
             "excited_fraction": {"type": ["number", "null"]},
             "duration_s": {"type": "number"},
+            "loss_fraction": {"type": ["number", "null"],
+                              "description": "fraction of its frames lost over its span, 0..1: the worst of its "
+                                             "signals' frames missing from their time stamps and its grid samples "
+                                             "in gaps (the first reason from 0.136; a NO-GO from 0.225 is labelled "
+                                             "NO-GO (link))"},
         },
         "required": ["start_s", "end_s", "source", "swept_input", "verdict", "pairs", "missing"],
     },
