@@ -28,7 +28,7 @@ def test_csv_with_a_column_map_converts_and_reports_counts(tmp_path):
                     '[columns.de]\nheader = "elev"\nscale = 2.0\nunits = "deg"\n')
     r = _run(src, "--out", tmp_path / "out.mcap", "--columns", cmap)
     assert r.returncode == 0, r.stderr
-    assert "messages read 200, written 200" in r.stdout and "nonfinite_cells" in r.stdout
+    assert "messages read 200, written 200" in r.stdout and "skipped: 1 nonfinite cells; repaired: none" in r.stdout
     got = read_topics_fields(tmp_path / "out.mcap", {"/table/test": ["de", "time_s"]})["/table/test"]
     expected = 2.0 * np.sin(t)
     expected[50] = np.nan

@@ -128,7 +128,8 @@ def test_fuzz_two_vehicles_garbage_poison_stamps_and_a_forged_frame(tmp_path):
     assert links and links[-1]["sources"][0]["bad_crc"] == sent_bad["bad_crc"]
     kinds = Counter(m.data["kind"] for m in read_messages(out, topics="/livesweep/alert"))
     assert kinds["link"] >= 2                    # the anomalies, and the second system
-    assert f"'bad_crc': {sent_bad['bad_crc']}" in text and "systems {1:" in text
+    rejected = next(ln for ln in text.splitlines() if "rejected or repaired: " in ln)
+    assert f" {sent_bad['bad_crc']} bad CRC" in rejected and "systems {1:" in text and "'" not in rejected
     assert rss < 500, f"peak RSS {rss:.0f} MB"
 
 

@@ -149,7 +149,7 @@ outputs = ["p", "r", "ay", "beta"]
 band_rad_s = [0.3, 20.0]
 sample_rate_hz = 50.0
 
-[transfer_functions.p_da]          # the seed's Eq. 2.7 roll-rate structure
+[transfer_functions.p_da]          # roll-rate structure of Tischler & Remple's Eq. 2.7 (docs/method.md §11.1)
 output = "p"
 input = "da"
 numerator = "s [zeta_phi, w_phi]"
@@ -259,9 +259,9 @@ def _command(name: str) -> str:
 
 def cmd_inspect(args) -> int:
     """``livesweep inspect LOG``: topics, fields, rates, span, test points, fitting channel maps."""
-    from livesweep.inspect import format_inspection, inspect_log
+    from livesweep.inspect import format_inspection, inspect_log, stderr_progress
 
-    print(format_inspection(inspect_log(args.log, columns=args.columns)))
+    print(format_inspection(inspect_log(args.log, columns=args.columns, progress=stderr_progress(args.log))))
     return 0
 
 
@@ -449,6 +449,34 @@ def _view(args, settings, name):
                      bind_host=args.rerun_bind)
 
 
+#: How the monitor's summary names the aligner's counts of what it repaired or left out: (one, many).
+_ALIGNER_WORDS = {
+    "missing_field": ("frame lacking a mapped field", "frames lacking a mapped field"),
+    "not_a_number": ("value that was not a number", "values that were not numbers"),
+    "late_dropped": ("late sample dropped", "late samples dropped"),
+    "reordered": ("sample put back in time order", "samples put back in time order"),
+    "wraps": ("clock wrap unwrapped", "clock wraps unwrapped"),
+    "resets": ("clock reset", "clock resets"),
+    "clock_rejected": ("sample with an implausible stamp dropped", "samples with an implausible stamp dropped"),
+    "other_system": ("frame of another system left out", "frames of another system left out"),
+    "samples_skipped": ("grid sample skipped at a clock jump", "grid samples skipped at a clock jump"),
+    "samples_invalid": ("grid sample left invalid in a gap (not interpolated)",
+                        "grid samples left invalid in gaps (not interpolated)"),
+}
+
+
+def _counts_text(counts: dict, words: dict | None = None) -> str:
+    """Counts for people: ``{"truncated_tail": 1, "bad_crc": 0}`` -> ``"1 truncated tail"``: zeros left
+    out; a key's words from ``words`` (a string, or ``(one, many)``), else the key with spaces;
+    "none" when nothing is left."""
+    parts = []
+    for k, v in counts.items():
+        if v:
+            w = (words or {}).get(k, str(k).replace("_", " "))
+            parts.append(f"{v} {w if isinstance(w, str) else w[v != 1]}")
+    return ", ".join(parts) or "none"
+
+
 def _loss_text(src: dict) -> str:
     """What a source lost, each kind by its own name: the kernel's drops (counted by the kernel),
     MAVLink sequence gaps (an estimate), datagrams recorded but not decoded at the stop."""
@@ -468,7 +496,8 @@ def _loss_text(src: dict) -> str:
 def _print_monitor_summary(summary: dict, out=sys.stdout) -> None:
     from livesweep.monitor.pipeline import LINK_ANOMALIES
 
-    anomaly_keys = {key for where, key, _ in LINK_ANOMALIES if where == "source"}
+    anomaly_words = {key: words for where, key, words in LINK_ANOMALIES if where == "source"}
+    anomaly_keys = set(anomaly_words)
     print(f"monitor: {summary['frames']} frames, {summary['estimates']} estimates over {summary['data_s'] or 0:.1f} s "
           f"of data in {summary['wall_s']:.1f} s", file=out)
     al = summary["aligner"]
@@ -476,7 +505,7 @@ def _print_monitor_summary(summary: dict, out=sys.stdout) -> None:
                                                    "wraps", "resets", "clock_rejected", "other_system",
                                                    "samples_skipped", "samples_invalid") and v}
     if issues:
-        print(f"  repairs and gaps: {issues}", file=out)
+        print(f"  repairs and gaps: {_counts_text(issues, _ALIGNER_WORDS)}", file=out)
     counters = summary.get("counters") or {}
     for src in counters.get("sources", []):
         received = src.get("received") or src.get("replayed") or {}
@@ -485,8 +514,9 @@ def _print_monitor_summary(summary: dict, out=sys.stdout) -> None:
         by_sys = sorted(systems.items(), key=lambda kv: -kv[1])
         sys_text = ", ".join(f"{k}: {v}" for k, v in by_sys[:5]) + (f", ... ({len(by_sys)} systems)" if len(by_sys) > 5
                                                                      else "")
+        rejected = f"; rejected or repaired: {_counts_text(bad, anomaly_words)}" if bad else "; nothing rejected"
         print(f"  {src['name']}: {sum(received.values())} frames" + (f" from systems {{{sys_text}}}"
-              if systems else "") + (f"; rejected or repaired: {bad}" if bad else "; nothing rejected"), file=out)
+              if systems else "") + rejected, file=out)
         loss = _loss_text(src)
         if loss:
             print(f"    {loss}", file=out)
@@ -756,16 +786,31 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--stage", default="residual-loop", choices=list(STAGES),
                    help="last stage to run (default: every stage the case defines)")
     i.add_argument("--no-plots", dest="plots", action="store_false",
-                   help="skip the PNG plots (report.json is the same; about half the time)")
+                   help="skip the SVG plots (plots/*.svg, and so report.html has none; report.json is the same; "
+                        "about half the time)")
     i.set_defaults(func=cmd_identify)
 
-    mp = sub.add_parser("maps", help="list the channel-map presets for real vehicles (for monitor/replay --map NAME)")
+    mp = sub.add_parser("maps", help="list the channel-map presets for real vehicles (for monitor, replay and "
+                                     "new-case --map NAME)",
+                        description="List the channel-map presets shipped with livesweep (ArduPilot and PX4 "
+                                    "vehicles): for each, its name, what it maps, its inputs and outputs, and what "
+                                    "the log or link must carry (messages, rates, parameters). Give a preset's name "
+                                    "to monitor, replay or new-case with --map NAME; `livesweep inspect LOG` says "
+                                    "which presets fit a log.")
     mp.set_defaults(func=cmd_maps)
 
-    c = sub.add_parser("convert", help="convert a tlog, DataFlash .bin, PX4 .px4log/.ulg, .npy or delimited text log to MCAP")
+    c = sub.add_parser("convert", help="convert a MAVLink .tlog, DataFlash .bin, PX4 .px4log or .ulg, NumPy .npy, "
+                                       "MATLAB .mat, Parquet or delimited text log to MCAP",
+                       description="Convert a log to livesweep's MCAP (the only output format). Inputs, recognised "
+                                   "by content, not by name: MAVLink .tlog; ArduPilot DataFlash .bin and PX4 sdlog2 "
+                                   ".px4log; PX4 ULog .ulg (extra livesweep[ulog]); tables: NumPy .npy, MATLAB v5 "
+                                   ".mat, Apache Parquet and delimited text (comma, tab, ';', '|' or whitespace), with a "
+                                   "column map (--columns) naming the columns, their units and the time column "
+                                   "(without one, the table's own column names are used). An MCAP file is not "
+                                   "converted (`livesweep recover` finishes an unfinished one).")
     c.add_argument("src", help="the log (its format is recognised by content, not by name)")
     c.add_argument("--out", required=True, help="MCAP file to write")
-    c.add_argument("--columns", help="column map (TOML) for .npy and text tables")
+    c.add_argument("--columns", help="column map (TOML) for .npy, .mat, Parquet and text tables")
     c.add_argument("--force", action="store_true", help="replace an existing --out (never the source log itself)")
     c.add_argument("--partial", action="store_true",
                    help="convert a damaged DataFlash or ULog log even when less than half of it is readable")
@@ -891,7 +936,7 @@ def cmd_convert(args) -> int:
     res = convert(args.src, args.out, force=args.force, **options)
     print(f"{res.source.name} ({res.format}{', ' + res.format_version if res.format_version else ''}) -> {res.output}")
     print(f"  messages read {res.messages_read}, written {res.messages_written} on {len(res.topics)} channels")
-    print(f"  skipped: {res.skipped or 'none'}; repaired: {res.repaired or 'none'}")
+    print(f"  skipped: {_counts_text(res.skipped)}; repaired: {_counts_text(res.repaired)}")
     for w in res.warnings:
         print(f"  warning: {w}")
     return 0
