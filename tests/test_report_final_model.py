@@ -182,3 +182,19 @@ def test_shipped_cases_name_their_modes_at_the_seed_eigenvalues(case, truth, tol
         assert nearest["name"] == name, (name, lam, nearest)
         assert abs(complex(*nearest["eigenvalue"]) - lam) < tol, (name, lam, nearest["eigenvalue"])
         assert f"<td>{name}</td>" in page
+
+
+def test_bounds_the_data_do_not_determine_read_not_determined():
+    """A candidate whose Cramér-Rao bound is 3e18 % (the residual loop's refused candidates, the
+    accuracy guidelines' reasons, the report's tables) reads "not determined", never a number."""
+    from livesweep.ident.accuracy import guideline_failures
+    from livesweep.ident.residual import effect_text
+    from livesweep.report.summary import cr_text
+
+    huge = {"name": "w_act_da", "value": 12.0, "cramer_rao_pct": 3.18e18, "insensitivity_pct": 4.0e17, "fixed": False}
+    text = effect_text({"kind": "actuator_lag", "where": "da", "parameters": [huge]})
+    assert "not determined" in text and "e+1" not in text
+    (reason,) = guideline_failures([huge])
+    assert "not determined" in reason and "e+1" not in reason
+    assert cr_text(3.18e18) == cr_text(None) == cr_text(float("inf")) == "not determined"
+    assert cr_text(12.34) == "12.3" and cr_text(999.0) == "999.0"
