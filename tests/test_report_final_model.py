@@ -132,6 +132,8 @@ def test_report_html_summary_tables_and_overlays_carry_the_final_model(notch_rep
         assert solid and dashed, key
         assert int(solid.group(2)) == round(final_j[key]) and int(dashed.group(2)) == round(pre_j[key])
         assert "stroke-dasharray" not in solid.group(1) and "stroke-dasharray" in dashed.group(1)
+        if key == ("p", "da"):          # the grey fit band of the transfer function has its legend entry
+            assert ">fit band of TF p_da</text>" in svg
         # and the page embeds exactly that plot
         assert base64.b64encode(svg.encode()).decode()[:200] in page
 
