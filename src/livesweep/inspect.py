@@ -505,9 +505,8 @@ class _Stats:
         if self.t_end is None or last_ns > self.t_end:
             self.t_end = last_ns
 
-    def tick(self, topic: str, t_ns: int, sysid=None, data=None, system: bool = True) -> None:
-        """One message of ``topic`` counted, not read (``data``: the first one's, to list its
-        fields); ``system``: counted for system ``sysid`` (False: a message that is no record)."""
+    def _count(self, topic: str, t_ns: int, data) -> None:
+        """``topic``'s count and time span (``data``: its first message's, to list its fields)."""
         st = self.topics.get(topic)
         if st is None:
             self.topics[topic] = [1, t_ns, t_ns, data]
@@ -519,22 +518,17 @@ class _Stats:
                 st[1] = t_ns
         if self.t_end is None or t_ns > self.t_end:
             self.t_end = t_ns
+
+    def tick(self, topic: str, t_ns: int, sysid=None, data=None, system: bool = True) -> None:
+        """One message of ``topic`` counted, not read (``data``: the first one's, to list its
+        fields); ``system``: counted for system ``sysid`` (False: a message that is no record)."""
+        self._count(topic, t_ns, data)
         if system:
             self._frames_by_system[sysid] = self._frames_by_system.get(sysid, 0) + 1
 
     def take(self, topic: str, t_ns: int, data) -> None:
         """One message of ``topic`` read: counted, its signals' samples, the vehicle and SystemID."""
-        st = self.topics.get(topic)
-        if st is None:
-            self.topics[topic] = [1, t_ns, t_ns, data]
-        else:
-            st[0] += 1
-            if t_ns > st[2]:
-                st[2] = t_ns
-            elif t_ns < st[1]:
-                st[1] = t_ns
-        if self.t_end is None or t_ns > self.t_end:
-            self.t_end = t_ns
+        self._count(topic, t_ns, data)
         if not isinstance(data, dict):
             return
         sysid = data.get("sysid")

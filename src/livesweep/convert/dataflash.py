@@ -566,9 +566,9 @@ def _gps_offset_ns(types: dict[int, _Type], order_pos: dict[int, np.ndarray], vt
 def _firmware(types: dict[int, _Type]) -> str:
     by_name = {t.name: t for t in types.values() if t.offsets.size}
     ver, msg = by_name.get("VER"), by_name.get("MSG")
-    for t, field in ((ver, "FWS"), (msg, "Message")):
-        if t is not None and field in t.columns:
-            for s in t.column(field):
+    for t, column in ((ver, "FWS"), (msg, "Message")):
+        if t is not None and column in t.columns:
+            for s in t.column(column):
                 m = _FIRMWARE_RE.match(s.strip())
                 if m:
                     return m.group(1)
@@ -819,20 +819,9 @@ class DataflashLog:
         want = frozenset(topics)
         keep = np.array([t.topic in want for t in log.live], dtype=bool)
         sel = np.flatnonzero(keep[log.tsel]) if log.live else np.zeros(0, dtype=np.int64)
-        live = log.live
-        names = [t.topic for t in live]
-        keys = [t.columns for t in live]
-        cursor = [0] * len(live)
-        for k0 in range(0, sel.size, _WINDOW):
-            at = sel[k0:k0 + _WINDOW]
-            win = log.tsel[at]
-            pending = {}
-            for ti, cnt in enumerate(np.bincount(win, minlength=len(live)).tolist()):
-                if cnt:
-                    pending[ti] = iter(live[ti].rows(cursor[ti], cursor[ti] + cnt))
-                    cursor[ti] += cnt
-            for ti, t_ns in zip(win.tolist(), self._log_ns[at].tolist()):
-                yield names[ti], t_ns, dict(zip(keys[ti], next(pending[ti])))
+        names = [t.topic for t in log.live]
+        for ti, t_ns, values in _rows(log, sel, self._log_ns):
+            yield names[ti], t_ns, values
 
 
 def iter_dataflash(src, *, names=None, partial: bool = False) -> Iterator[DataflashRecord]:
@@ -868,6 +857,14 @@ def iter_dataflash(src, *, names=None, partial: bool = False) -> Iterator[Datafl
 
 def _records(log: _Log, sel: np.ndarray) -> Iterator[DataflashRecord]:
     live = log.live
+    for ti, t_us, values in _rows(log, sel, log.vt):
+        yield DataflashRecord(t_us, live[ti].name, values)
+
+
+def _rows(log: _Log, sel: np.ndarray, times: np.ndarray) -> Iterator[tuple[int, int, dict]]:
+    """``(type index, times[k], {column: value})`` of the records ``sel`` (indices into the file's
+    records, in file order), values built :data:`_WINDOW` records at a time."""
+    live = log.live
     keys = [t.columns for t in live]
     cursor = [0] * len(live)
     for k0 in range(0, sel.size, _WINDOW):
@@ -878,8 +875,8 @@ def _records(log: _Log, sel: np.ndarray) -> Iterator[DataflashRecord]:
             if cnt:
                 pending[ti] = iter(live[ti].rows(cursor[ti], cursor[ti] + cnt))
                 cursor[ti] += cnt
-        for ti, t_us in zip(win.tolist(), log.vt[at].tolist()):
-            yield DataflashRecord(t_us, live[ti].name, dict(zip(keys[ti], next(pending[ti]))))
+        for ti, t in zip(win.tolist(), times[at].tolist()):
+            yield ti, t, dict(zip(keys[ti], next(pending[ti])))
 
 
 def convert_dataflash(src, out, *, gps_time: bool = True, partial: bool = False, **options) -> ConversionResult:
