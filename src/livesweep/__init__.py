@@ -7,6 +7,8 @@ The library face (each name loads its module on first use, so ``import livesweep
 
 - :func:`identify` -- every stage of a case file, as one frozen :class:`Identification`;
   :func:`write_report` writes it to a folder (``report.json``, ``report.html``, plots).
+- :func:`replay` -- the live monitor over an MCAP log, as ``livesweep replay`` runs it, as one frozen
+  :class:`ReplayResult` (test points, verdicts, alerts as the recording's channels carry them).
 - :func:`frequency_response` -- frequency responses from numpy arrays.
 - :func:`fit_transfer_function` -- a transfer function fitted to one pair.
 - :class:`StateSpaceModel` -- ``StateSpaceModel.from_matrices(...)`` or ``.from_table(...)``.
@@ -20,6 +22,8 @@ _LAZY = {
     "Identification": ("livesweep.pipeline.identify", "Identification"),
     "STAGES": ("livesweep.pipeline", "STAGES"),
     "write_report": ("livesweep.report.writer", "write_report"),
+    "replay": ("livesweep.monitor.session", "replay"),
+    "ReplayResult": ("livesweep.monitor.session", "ReplayResult"),
     "frequency_response": ("livesweep.arrays", "frequency_response"),
     "fit_transfer_function": ("livesweep.arrays", "fit_transfer_function"),
     "StateSpaceModel": ("livesweep.ident.state_space", "StateSpaceModel"),

@@ -680,18 +680,17 @@ def _recorded_settings(log: str):
 
 
 def cmd_replay(args) -> int:
-    """Run the monitor pipeline over a recorded MCAP log, with the settings it was recorded with
-    unless --case or --map says otherwise."""
+    """Run the monitor pipeline over a recorded MCAP log (:func:`livesweep.monitor.session.replay`),
+    with the settings it was recorded with unless --case or --map says otherwise."""
     from dataclasses import replace
 
-    from livesweep.monitor.pipeline import MonitorPipeline
-    from livesweep.telemetry.replay import McapReplaySource
+    from livesweep.monitor.session import recorded_settings, replay
 
     if not Path(args.log).is_file():
         raise ConfigError(f"log {args.log!r} does not exist")
     settings = None
     if not args.case and not getattr(args, "map", None):
-        settings = _recorded_settings(args.log)
+        settings = recorded_settings(args.log)
         if settings is not None:
             print(f"replay: the settings recorded in {args.log} (give --case or --map to use others)")
             overrides = {k: v for k, v in (("window_s", args.window), ("update_period_s", args.update_period),
@@ -703,9 +702,8 @@ def cmd_replay(args) -> int:
                 f"{args.log}: livesweep_settings.json", names={k: v for k, v in _MONITOR_OPTIONS.items() if k in overrides})
     if settings is None:
         settings = _monitor_settings(args)
-    pipe = MonitorPipeline(settings, [McapReplaySource(args.log, speed=args.speed or 0.0)],
-                           view=_view(args, settings, "replay"))
-    _print_monitor_summary(pipe.run())
+    result = replay(args.log, settings=settings, rerun=_view(args, settings, "replay"), speed=args.speed or 0.0)
+    _print_monitor_summary(result.summary)
     return 0
 
 

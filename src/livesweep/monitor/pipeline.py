@@ -438,10 +438,16 @@ class MonitorPipeline:
     status_line : livesweep.monitor.status_line.StatusLine, optional
         Gets a one-line status (frames/s, losses, test point, verdict, sweep frequency, alerts)
         about once a second, for an operator without Rerun.
+    results : callable, optional
+        ``results(name, payload)`` gets every live result as the recording's ``/livesweep/<name>``
+        channel would (``test_point``, ``verdict``, ``alert``, ``link``, every ``results_every``-th
+        ``estimate``), with or without a recorder, in the caller's thread
+        (:func:`livesweep.monitor.session.replay` keeps them).
     """
 
     def __init__(self, settings: MonitorSettings, sources, *, recorder=None, view=None, publisher=None,
-                 keep_estimates: bool | int = 100, queue_limit: int = QUEUE_LIMIT_FRAMES, status_line=None):
+                 keep_estimates: bool | int = 100, queue_limit: int = QUEUE_LIMIT_FRAMES, status_line=None,
+                 results=None):
         self.s = settings
         for n in (*settings.inputs, *settings.outputs, *(settings.references or ())):
             if n not in settings.signals:
@@ -449,6 +455,7 @@ class MonitorPipeline:
         self.sources = list(sources)
         self.recorder, self.view, self.publisher = recorder, view, publisher
         self.status_line = status_line
+        self.results = results
         self._status_frames = (time.monotonic(), 0)
         self.names = tuple(dict.fromkeys((*settings.inputs, *settings.outputs, *(settings.references or ()))))
         self.aligner = GridAligner(settings.signals, self.names, settings.sample_rate_hz, max_fill_s=settings.window_s,
@@ -762,9 +769,7 @@ class MonitorPipeline:
                 self.view.log_test_point(t_s, rec)
                 self._show_focus(t_s, rec)
             if rec["state"] == "closed":
-                if self.recorder is not None:
-                    self.recorder.record_result("test_point", rec, flush=True,
-                                                log_time_ns=receive_ns() if log_time_ns is None else log_time_ns)
+                self._result("test_point", rec, log_time_ns, flush=True)
                 if self.publisher is not None:
                     self.publisher.publish("test_point", rec)
             self._update_verdict(t_s, rec)
@@ -815,8 +820,7 @@ class MonitorPipeline:
                    "test_point": None if rec is None else {k: rec[k] for k in ("start_s", "end_s", "source",
                                                                                 "swept_input", "state")}}
         self.verdict = verdict
-        if self.recorder is not None:
-            self.recorder.record_result("verdict", payload, log_time_ns=receive_ns(), flush=True)
+        self._result("verdict", payload, flush=True)
         if self.publisher is not None:
             self.publisher.publish("verdict", payload)
         if self.view is not None:
@@ -979,9 +983,8 @@ class MonitorPipeline:
         payload = self._payload(est, rows)
         if self.publisher is not None:
             self.publisher.publish("estimate", payload)
-        if self.recorder is not None:
-            if self.totals.estimates % max(1, self.s.results_every) == 0:
-                self.recorder.record_result("estimate", payload, log_time_ns=receive_ns())
+        if self.totals.estimates % max(1, self.s.results_every) == 0:
+            self._result("estimate", payload)
 
     def _sweep_in_window(self, t_s: float) -> bool:
         """A test point's data is in the sliding window: while one runs, and until its data has left."""
@@ -1022,10 +1025,17 @@ class MonitorPipeline:
 
     def _record_alert(self, t_s: float | None, alert: Alert, log_time_ns: int | None = None) -> None:
         self.alerts_raised += 1
+        self._result("alert", {"t_s": t_s, "kind": alert.kind, "message": alert.message, "value": float(alert.value)},
+                     log_time_ns)
+
+    def _result(self, name: str, payload: dict, log_time_ns: int | None = None, *, flush: bool = False) -> None:
+        """A live result: recorded on ``/livesweep/<name>`` (at ``log_time_ns``, else now) and handed
+        to ``results``."""
         if self.recorder is not None:
-            self.recorder.record_result("alert", {"t_s": t_s, "kind": alert.kind, "message": alert.message,
-                                                  "value": float(alert.value)},
-                                        log_time_ns=receive_ns() if log_time_ns is None else log_time_ns)
+            self.recorder.record_result(name, payload, log_time_ns=receive_ns() if log_time_ns is None else log_time_ns,
+                                        flush=flush)
+        if self.results is not None:
+            self.results(name, payload)
 
     # -- link counters ------------------------------------------------------------------------
     def counters(self) -> dict:
@@ -1095,14 +1105,12 @@ class MonitorPipeline:
                 self.publisher.publish("alert", {"t_s": self._t_data, "kind": a.kind, "message": a.message})
         if self.status_line is not None:
             self._status(now, counts)
-        if self.recorder is not None:
-            self.recorder.record_result("link", {"t_s": self._t_data, "wall_s": round(now - self._t_start, 3),
-                                                 "frames_recorded": self.totals.frames,
-                                                 "analysis_shed": self.analysis_shed,
-                                                 "sources": c["sources"], "aligner": c["aligner"]},
-                                        log_time_ns=receive_ns())
-            if final:
-                self.recorder.set_counters(c)
+        if self.recorder is not None or self.results is not None:
+            self._result("link", {"t_s": self._t_data, "wall_s": round(now - self._t_start, 3),
+                                  "frames_recorded": self.totals.frames, "analysis_shed": self.analysis_shed,
+                                  "sources": c["sources"], "aligner": c["aligner"]})
+        if final and self.recorder is not None:
+            self.recorder.set_counters(c)
 
     def _map_check(self, receive_ns: int) -> None:
         """Diagnose the map DIAGNOSE_AFTER_S of receive time after the first frame; after that, watch
