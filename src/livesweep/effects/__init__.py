@@ -35,7 +35,7 @@ from __future__ import annotations
 
 from dataclasses import MISSING, fields
 
-from livesweep.effects.base import Candidate, Effect
+from livesweep.effects.base import ROLES, Candidate, Effect, ParameterRole
 from livesweep.effects.derivative import MissingDerivative
 from livesweep.effects.inputs import ActuatorLag, ActuatorSecondOrder, NotchFilter, TimeDelay
 from livesweep.effects.outputs import Dropouts, ScaleFactor, SensorBias, SensorSkew, Spikes, StructuralMode
@@ -44,7 +44,7 @@ from livesweep.errors import ConfigError
 __all__ = [
     "Effect", "Candidate", "TimeDelay", "ActuatorLag", "ActuatorSecondOrder", "NotchFilter", "StructuralMode",
     "SensorSkew", "ScaleFactor", "SensorBias", "Spikes", "Dropouts", "MissingDerivative",
-    "EFFECT_KINDS", "SEARCHED_KINDS", "parse_effect", "make_effect",
+    "EFFECT_KINDS", "SEARCHED_KINDS", "parse_effect", "make_effect", "ParameterRole", "ROLES", "parameter_role",
 ]
 
 #: Every kind, by name.
@@ -57,6 +57,16 @@ EFFECT_KINDS: dict[str, type[Effect]] = {
 }
 #: The kinds the residual loop looks for, in catalogue order.
 SEARCHED_KINDS: tuple[str, ...] = tuple(k for k, c in EFFECT_KINDS.items() if c.searched)
+
+#: Every parameter stem an effect declares, longest first (``zeta_zero_mode`` before ``zeta_mode``).
+_ROLES_BY_STEM = sorted({r.stem: r for c in EFFECT_KINDS.values() for r in c.parameter_roles}.values(),
+                        key=lambda r: -len(r.stem))
+
+
+def parameter_role(name: str) -> ParameterRole | None:
+    """The declared role and units of a model parameter an effect added (``w_notch_da`` ->
+    frequency, rad/s); None for a parameter no effect adds (a derivative, a case's own delay)."""
+    return next((r for r in _ROLES_BY_STEM if name.startswith(r.stem + "_")), None)
 
 
 def make_effect(kind: str, **params) -> Effect:

@@ -10,12 +10,35 @@ import numpy as np
 
 from livesweep.errors import require_number
 
-__all__ = ["Effect", "Candidate", "check_number"]
+__all__ = ["Effect", "Candidate", "ParameterRole", "ROLES", "check_number"]
+
+#: What a parameter an effect adds to a model does: places it in frequency [rad/s], shapes it
+#: (a damping, a notch's depth) [-], delays [s], or scales [-].
+ROLES = ("frequency", "damping", "shape", "delay", "gain")
 
 
 def check_number(kind, name, value, *, positive=False, nonneg=False, upper=None) -> float:
     """``value`` as a finite float, or ConfigError naming the effect and the parameter."""
     return require_number(value, f"effect {kind}: {name}", positive=positive, nonnegative=nonneg, upper=upper)
+
+
+@dataclass(frozen=True)
+class ParameterRole:
+    """A model parameter an effect adds: named ``f"{stem}_{where}"`` (``w_notch_da``), with its
+    role (one of :data:`ROLES`) and units. The report's units, the residual loop's choice of
+    what may be fixed and its band check read these, never the parameter's name."""
+
+    stem: str
+    role: str
+    unit: str
+
+    def __post_init__(self):
+        if self.role not in ROLES:
+            raise ValueError(f"parameter {self.stem}: role {self.role!r} is not one of {', '.join(ROLES)}")
+
+    def name(self, where: str) -> str:
+        """The parameter's name at ``where`` (an input or output)."""
+        return f"{self.stem}_{where}"
 
 
 @dataclass(frozen=True)
@@ -77,6 +100,8 @@ class Effect:
         Where the residual loop looks: ``"input"``, ``"output"`` or both.
     n_parameters : int
         Parameters it adds to a model.
+    parameter_roles : tuple of ParameterRole
+        Every parameter it adds to a model (:meth:`parameter_name` names them).
     """
 
     kind: ClassVar[str]
@@ -86,6 +111,16 @@ class Effect:
     searched: ClassVar[bool] = False
     places: ClassVar[tuple] = ()
     n_parameters: ClassVar[int] = 0
+    parameter_roles: ClassVar[tuple] = ()
+
+    @classmethod
+    def parameter_name(cls, stem: str, where: str) -> str:
+        """The name of the declared parameter ``stem`` at ``where``; KeyError for an undeclared one
+        (every parameter an effect adds has a role and units)."""
+        for r in cls.parameter_roles:
+            if r.stem == stem:
+                return r.name(where)
+        raise KeyError(f"effect {cls.kind}: parameter {stem!r} is not among its parameter_roles")
 
     @property
     def target(self) -> str:

@@ -7,7 +7,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from livesweep.effects.base import Effect, check_number
+from livesweep.effects.base import Effect, ParameterRole, check_number
 from livesweep.effects.table import add_parameter, add_state, product, route_input
 from livesweep.errors import ConfigError
 
@@ -77,6 +77,7 @@ class TimeDelay(Effect):
     Residual signature: phase growing linearly with frequency on every pair of the input,
     magnitude flat. Added to a model as (or onto) the input's delay parameter ``tau_<input>``.
     """
+    parameter_roles = (ParameterRole("tau", "delay", "s"),)
 
     input: str
     delay_s: float
@@ -112,7 +113,7 @@ class TimeDelay(Effect):
             start += float(t["constants"][cur])
         elif isinstance(cur, (int, float)):
             start += float(cur)
-        name = add_parameter(t, f"tau_{where}", start)
+        name = add_parameter(t, cls.parameter_name("tau", where), start)
         t.setdefault("delays", {})[where] = name
         return t, [name]
 
@@ -124,6 +125,7 @@ class ActuatorLag(Effect):
     Residual signature: ``w_a/(s + w_a)`` on every pair of the input, the corner ``w_a = 1/T``
     on a grid. Added as a state ``act_<input>`` with the parameter ``w_act_<input>`` [rad/s].
     """
+    parameter_roles = (ParameterRole("w_act", "frequency", "rad/s"),)
 
     input: str
     time_constant_s: float
@@ -157,7 +159,7 @@ class ActuatorLag(Effect):
     @classmethod
     def augment(cls, t, where, par):
         n0, j = len(t["states"]), t["inputs"].index(where)
-        w = add_parameter(t, f"w_act_{where}", 1.0 / par["time_constant_s"])
+        w = add_parameter(t, cls.parameter_name("w_act", where), 1.0 / par["time_constant_s"])
         (a,) = add_state(t, [f"act_{where}"])
         route_input(t, j, a, n0)
         t["F"][a][a] = f"-{w}"
@@ -173,6 +175,7 @@ class ActuatorSecondOrder(Effect):
     Added as states ``act_``/``actrate_<input>`` with ``wn_act_<input>`` [rad/s] and
     ``zeta_act_<input>``.
     """
+    parameter_roles = (ParameterRole("wn_act", "frequency", "rad/s"), ParameterRole("zeta_act", "damping", "-"))
 
     input: str
     omega_rad_s: float
@@ -213,8 +216,8 @@ class ActuatorSecondOrder(Effect):
     @classmethod
     def augment(cls, t, where, par):
         n0, j = len(t["states"]), t["inputs"].index(where)
-        wn = add_parameter(t, f"wn_act_{where}", par["omega_rad_s"])
-        z = add_parameter(t, f"zeta_act_{where}", par["zeta"])
+        wn = add_parameter(t, cls.parameter_name("wn_act", where), par["omega_rad_s"])
+        z = add_parameter(t, cls.parameter_name("zeta_act", where), par["zeta"])
         a, ad = add_state(t, [f"act_{where}", f"actrate_{where}"])
         route_input(t, j, a, n0)
         t["F"][a][ad] = "1"
@@ -234,6 +237,9 @@ class NotchFilter(Effect):
     factor on every pair of the input (frequency and damping on a grid, depth linear). Added as
     states ``notch_``/``notchrate_<input>`` with ``w_notch_``, ``zeta_notch_``, ``depth_notch_<input>``.
     """
+    parameter_roles = (ParameterRole("w_notch", "frequency", "rad/s"),
+                       ParameterRole("zeta_notch", "damping", "-"),
+                       ParameterRole("depth_notch", "shape", "-"))
 
     input: str
     omega_rad_s: float
@@ -266,9 +272,9 @@ class NotchFilter(Effect):
     @classmethod
     def augment(cls, t, where, par):
         n0, j = len(t["states"]), t["inputs"].index(where)
-        w = add_parameter(t, f"w_notch_{where}", par["omega_rad_s"])
-        z = add_parameter(t, f"zeta_notch_{where}", par["zeta"])
-        d = add_parameter(t, f"depth_notch_{where}", par["depth"])
+        w = add_parameter(t, cls.parameter_name("w_notch", where), par["omega_rad_s"])
+        z = add_parameter(t, cls.parameter_name("zeta_notch", where), par["zeta"])
+        d = add_parameter(t, cls.parameter_name("depth_notch", where), par["depth"])
         x, v = add_state(t, [f"notch_{where}", f"notchrate_{where}"])
         gain = f"-2*{d}*{z}*{w}"
         for i in range(n0):

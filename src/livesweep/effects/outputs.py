@@ -12,7 +12,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from livesweep.effects.base import Effect, check_number
+from livesweep.effects.base import Effect, ParameterRole, check_number
 from livesweep.effects.inputs import _delay_slope, resonance_screen
 from livesweep.effects.table import add_parameter, add_state, product
 from livesweep.errors import ConfigError
@@ -37,6 +37,9 @@ class StructuralMode(Effect):
     damping on a grid, ``g`` linear. Added as states ``mode_``/``moderate_<output>`` driven by the
     output, with ``w_mode_``, ``zeta_mode_`` (pole) and ``zeta_zero_mode_<output>``.
     """
+    parameter_roles = (ParameterRole("w_mode", "frequency", "rad/s"),
+                       ParameterRole("zeta_mode", "damping", "-"),
+                       ParameterRole("zeta_zero_mode", "damping", "-"))
 
     output: str
     omega_rad_s: float
@@ -81,9 +84,9 @@ class StructuralMode(Effect):
     @classmethod
     def augment(cls, t, where, par):
         o = t["outputs"].index(where)
-        w = add_parameter(t, f"w_mode_{where}", par["omega_rad_s"])
-        zp = add_parameter(t, f"zeta_mode_{where}", par["zeta_pole"])
-        zz = add_parameter(t, f"zeta_zero_mode_{where}", par["zeta_zero"])
+        w = add_parameter(t, cls.parameter_name("w_mode", where), par["omega_rad_s"])
+        zp = add_parameter(t, cls.parameter_name("zeta_mode", where), par["zeta_pole"])
+        zz = add_parameter(t, cls.parameter_name("zeta_zero_mode", where), par["zeta_zero"])
         h_row, j_row = list(t["H"][o]), list(t["J"][o])
         x, v = add_state(t, [f"mode_{where}", f"moderate_{where}"])
         for c, e in enumerate(h_row):
@@ -104,6 +107,7 @@ class SensorSkew(Effect):
     on every pair of one input (the input is logged late). Added as the output's
     ``output_delays`` or the input's ``input_skews`` parameter ``skew_<name>`` [s].
     """
+    parameter_roles = (ParameterRole("skew", "delay", "s"),)
 
     output: str
     delay_s: float
@@ -135,7 +139,7 @@ class SensorSkew(Effect):
     @classmethod
     def augment(cls, t, where, par):
         if where in t["inputs"]:
-            name = add_parameter(t, f"skew_{where}", par["delay_s"])
+            name = add_parameter(t, cls.parameter_name("skew", where), par["delay_s"])
             t.setdefault("input_skews", {})[where] = name
             delay = (t.get("delays") or {}).get(where)
             if isinstance(delay, str) and delay in t["parameters"] and not t["parameters"][delay].get("fixed"):
@@ -147,7 +151,7 @@ class SensorSkew(Effect):
         if isinstance(cur, str) and cur in t["parameters"]:
             t["parameters"][cur] = {"value": float(t["parameters"][cur].get("value", 0.0)) + par["delay_s"]}
             return t, [cur]
-        name = add_parameter(t, f"skew_{where}", par["delay_s"])
+        name = add_parameter(t, cls.parameter_name("skew", where), par["delay_s"])
         t.setdefault("output_delays", {})[where] = name
         return t, [name]
 
@@ -160,6 +164,7 @@ class ScaleFactor(Effect):
     multiplying the output's rows of H and J. Often absorbed by the derivatives (a rescaled
     state): then the loop reports it as not identifiable rather than guessing.
     """
+    parameter_roles = (ParameterRole("k", "gain", "-"),)
 
     output: str
     factor: float
@@ -187,7 +192,7 @@ class ScaleFactor(Effect):
     @classmethod
     def augment(cls, t, where, par):
         o = t["outputs"].index(where)
-        name = add_parameter(t, f"k_{where}", par["factor"])
+        name = add_parameter(t, cls.parameter_name("k", where), par["factor"])
         t["H"][o] = [product(name, e) for e in t["H"][o]]
         t["J"][o] = [product(name, e) for e in t["J"][o]]
         return t, [name]

@@ -42,7 +42,7 @@ from statistics import NormalDist
 
 import numpy as np
 
-from livesweep.effects import EFFECT_KINDS, SEARCHED_KINDS, Candidate
+from livesweep.effects import EFFECT_KINDS, SEARCHED_KINDS, Candidate, parameter_role
 from livesweep.effects.table import normalised, restart_from
 from livesweep.errors import ConfigError
 from livesweep.ident.accuracy import (MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT, guideline_failures,
@@ -55,7 +55,7 @@ from livesweep.ident.selection import (FALSE_ALARM, NOISE_INFLATION, effective_p
 from livesweep.ident.state_space import StateSpaceFit, StateSpaceModel, fit_state_space, refit_state_space
 from livesweep.numbers import finite_or_none
 
-__all__ = ["KINDS", "FALSE_ALARM", "MIN_RELATIVE_COST_DROP", "FIXABLE_PREFIXES", "FREQUENCY_PREFIXES",
+__all__ = ["KINDS", "FALSE_ALARM", "MIN_RELATIVE_COST_DROP", "FIXABLE_ROLES", "FREQUENCY_ROLES",
            "CLEAR_EVIDENCE_FACTOR", "ONLY_PARAMETER_CR_PCT", "PARTIAL", "PairResidual", "Candidate", "LoopStep",
            "ResidualLoop", "pair_residuals", "diagnose", "augment_table", "run_residual_loop", "table_with_fit", "effect_text",
            "model_effects"]
@@ -904,7 +904,7 @@ CLEAR_EVIDENCE_FACTOR = 2.0
 #: Parameters of an effect with several that may be fixed at their fitted value when poorly
 #: determined: the shape parameters (a damping, a notch's depth or a mode's gain), never the
 #: frequency that places the effect (a frequency that is not determined means the effect is not there).
-FIXABLE_PREFIXES = ("zeta_", "depth_")
+FIXABLE_ROLES = ("damping", "shape")
 #: An effect's only parameter may miss the accuracy guidelines and be fixed at its fitted value
 #: when its Cramer-Rao bound is at most this [%] of its value: three bounds from zero, the
 #: parameter is there, as the effect's F-test (at :data:`CLEAR_EVIDENCE_FACTOR`) says the
@@ -913,13 +913,19 @@ ONLY_PARAMETER_CR_PCT = 100.0 / 3.0
 #: Parameters that place an effect in frequency [rad/s]: fixing another of its parameters needs
 #: this one inside the fitted band (a "notch" at 25 rad/s fitted to 0.3-20 rad/s data is a lag in
 #: disguise, not a notch whose depth the data could not pin down).
-FREQUENCY_PREFIXES = ("w_", "wn_")
+FREQUENCY_ROLES = ("frequency",)
+
+
+def _role(name: str) -> str | None:
+    """The role an effect declares for its parameter ``name`` (None: not an effect's)."""
+    role = parameter_role(name)
+    return None if role is None else role.role
 
 
 def _worst(params):
     """The free parameter to fix at its fitted value, or None.
 
-    The shape parameter (:data:`FIXABLE_PREFIXES`) that misses the guidelines by most, relative to
+    The shape parameter (:data:`FIXABLE_ROLES`) that misses the guidelines by most, relative to
     its limit, when only shape parameters miss them and another parameter stays free; or an
     effect's only parameter when its Cramer-Rao bound is within :data:`ONLY_PARAMETER_CR_PCT`
     (e.g. a 25 ms skew on a noisy accelerometer, the cost flat in it alone; a 30 ms skew on a
@@ -934,7 +940,7 @@ def _worst(params):
     bad = [p for p in free if excess(p) > 1.0]
     if not bad:
         return None
-    if len(free) > 1 and all(p["name"].startswith(FIXABLE_PREFIXES) for p in bad):
+    if len(free) > 1 and all(_role(p["name"]) in FIXABLE_ROLES for p in bad):
         return max(bad, key=excess)
     if len(free) == 1 and bad[0]["cramer_rao_pct"] is not None and bad[0]["cramer_rao_pct"] <= ONLY_PARAMETER_CR_PCT:
         return bad[0]
@@ -1004,7 +1010,7 @@ def _try(table, cand, fit, judge, ss_before, ver_before):
         accuracy = guideline_failures(params)
         worst = _worst(params)
         lo, hi = band_of(pairs)
-        outside = any(p["name"].startswith(FREQUENCY_PREFIXES) and not lo <= p["value"] <= hi for p in params)
+        outside = any(_role(p["name"]) in FREQUENCY_ROLES and not lo <= p["value"] <= hi for p in params)
         if (shape or not accuracy or worst is None or rec["fixed"] or outside
                 or ss_before - ss_after < CLEAR_EVIDENCE_FACTOR * sig.needed):
             break

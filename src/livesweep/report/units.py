@@ -9,18 +9,18 @@ A parameter that is the whole entry of a matrix element gets the element's units
 - ``M[i][j]``: units of ``x_i`` over units of ``x_j``;
 - delays, output delays and input skews: s.
 
-Parameters the residual loop adds carry their kind in their name (``w_``/``wn_``: rad/s,
-``zeta_``/``depth_``/``k_``: dimensionless, ``tau_``/``skew_``: s). Anything else (a parameter only
-inside an expression) has no units here (None).
+A parameter the residual loop added has the units its effect declares
+(:attr:`livesweep.effects.Effect.parameter_roles`). Anything else (a parameter only inside an
+expression) has no units here (None).
 """
 
 from __future__ import annotations
 
+from livesweep.effects import parameter_role
+
 __all__ = ["parameter_units", "rate_of", "ratio"]
 
 _DIMENSIONLESS = {"", "1", "-"}
-_BY_PREFIX = (("wn_", "rad/s"), ("w_", "rad/s"), ("zeta_", "-"), ("depth_", "-"), ("k_", "-"), ("tau_", "s"),
-              ("skew_", "s"))
 
 
 def _norm(unit: str) -> str:
@@ -101,6 +101,7 @@ def parameter_units(table: dict, signal_units: dict) -> dict:
             if isinstance(v, str) and v in params:
                 out.setdefault(v, "s")
     for name in params:
-        if name not in out:
-            out[name] = next((u for prefix, u in _BY_PREFIX if name.startswith(prefix)), None)
+        if name not in out:           # a parameter an effect added: the units its effect declares
+            role = parameter_role(name)
+            out[name] = role.unit if role is not None else None
     return out
