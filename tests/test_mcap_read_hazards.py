@@ -21,6 +21,7 @@ from mcap.writer import Writer
 from livesweep.errors import LogFormatError
 from livesweep.telemetry.mcap_log import (SKIP_REASONS, McapLogWriter, SkippedMessages, iter_file_order, read_fields,
                                           read_messages, read_topics_fields)
+from livesweep.telemetry import mcap_columns
 from livesweep.telemetry.mcap_recover import recover
 
 T0 = 1_000_000_000
@@ -323,10 +324,9 @@ def test_identify_on_a_crafted_number_is_one_line_exit_2(tmp_path):
 
 
 def test_columns_decoded_in_batches_equal_mcaps_reader_and_name_the_right_message(tmp_path, monkeypatch):
-    import livesweep.telemetry.mcap_log as mcap_log
     from mcap.reader import make_reader
 
-    monkeypatch.setattr(mcap_log, "_DECODE_BATCH", 64)
+    monkeypatch.setattr(mcap_columns, "_DECODE_BATCH", 64)
     payloads = [json.dumps({"x": k * 0.25, "y": None if k % 9 == 0 else -k}).encode() for k in range(300)]
     path = _write_raw(tmp_path / "batches.mcap", payloads)
     got = read_fields(path, "/a", ["x", "y"])
