@@ -44,6 +44,7 @@ from livesweep.sim.models import xv15_cruise  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 SIM_RTOL = 1e-7            # simulations agree to this fraction of each output's range (rounding over 21 700 steps)
 FIT_RTOL = 1e-3            # output-error fits on either simulation agree to this (relative)
+FIT_BUDGET_S = 5.0         # the frequency-domain fit (8 pairs, 17 parameters, CR bounds) stays under this
 
 
 def simulate_modal(M, F, G, H, J, tau_s, dt, u, bias):
@@ -152,7 +153,10 @@ def main() -> None:
         print(f"  the same fit on the per-sample loop:        {t_loop:7.3f} s  (same cost to 1e-8, same unknowns to "
               f"{FIT_RTOL:g}; loop / lfilter {t_loop / t_oe:.1f}x)")
     print(f"ratio livesweep / baseline (frequency-domain fit / output-error fit): {t_fd / t_oe:.4f} "
-          f"(target <= 1: {'OK' if t_fd <= t_oe else 'MISSED'}; the state-space fit must stay under 5 s)")
+          f"(target <= 1: {'OK' if t_fd <= t_oe else 'MISSED'})")
+    # the budget tests/test_state_space.py asserted until its timing moved here
+    print(f"budget: the state-space fit in {t_fd:.3f} s, under {FIT_BUDGET_S:g} s: "
+          f"{'OK' if t_fd < FIT_BUDGET_S else 'MISSED'}")
 
 
 if __name__ == "__main__":

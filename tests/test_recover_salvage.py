@@ -8,7 +8,6 @@ from __future__ import annotations
 import random
 import re
 import struct
-import time
 from pathlib import Path
 
 import pytest
@@ -132,10 +131,7 @@ def _cli(capsys, src: Path, out: Path) -> tuple[int, str]:
 def test_an_undamaged_recording_copies_whole_and_exits_0(recording, tmp_path, capsys):
     src, out = tmp_path / "flight.mcap", tmp_path / "copy.mcap"
     src.write_bytes(recording)
-    t0 = time.perf_counter()
-    r = recover(src, out)
-    took = time.perf_counter() - t0
-    assert took < 15, f"recovering {N_MESSAGES} messages took {took:.1f} s"
+    r = recover(src, out)                   # its speed: benchmarks/bench_recover.py (no timing here)
     assert (r.messages_written, r.messages_expected, r.messages_lost) == (N_MESSAGES, N_MESSAGES, 0)
     assert r.messages_unverified == 0
     assert r.clean and r.complete_source and not r.unreadable and not r.skipped_bytes

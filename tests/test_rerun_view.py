@@ -6,9 +6,7 @@ import os
 import re
 import shutil
 import socket
-import statistics
 import subprocess
-import time
 
 import numpy as np
 import pyarrow as pa
@@ -615,11 +613,10 @@ def test_bad_inputs_name_what_is_wrong(tmp_path):
 # ------------------------------------------------------------------------------------------- cost
 
 
-def test_estimate_cost_48_pairs_150_frequencies():
-    """4 inputs x 12 outputs x 150 frequencies: one log_estimate after the first stays well under 100 ms.
-
-    Timed on the calling thread's CPU clock (the machine may be shared); wall time is printed.
-    """
+def test_estimate_of_48_pairs_150_frequencies_logs_every_update():
+    """4 inputs x 12 outputs x 150 frequencies: every log_estimate after the first logs the update
+    into the recording. Its cost (budget 100 ms CPU, against the plain Rerun SDK route) is
+    benchmarks/bench_rerun_view.py's: no timing here."""
     ins = [f"u{k}" for k in range(4)]
     outs = [f"y{k}" for k in range(12)]
     view = RerunView(ins, outs)          # no sink: in-memory recording, drained below
@@ -629,19 +626,17 @@ def test_estimate_cost_48_pairs_150_frequencies():
         s = 1j * omega
         g = 10.0 / (s * (s / 5.0 + 1.0))
         rows = [{"output": o, "input": i, "band": (1.0, 10.0), "fraction": 0.5} for o in outs for i in ins]
-        cpu, wall = [], []
-        for n in range(8):
+        view.memory.drain_as_bytes()
+        sizes = []
+        for n in range(3):
             coh = np.clip(rng.normal(0.8, 0.1, (12, 4, 150)), 0, 1)
             mag = 20 * np.log10(abs(g)) + rng.normal(0, 0.5, (12, 4, 150))
             pha = np.degrees(np.unwrap(np.angle(g))) + rng.normal(0, 3, (12, 4, 150))
-            c0, w0 = time.thread_time(), time.perf_counter()
             view.log_estimate(1.0 + n, omega, outs, ins, coh, mag, pha, rows, "continue", [])
-            cpu.append(time.thread_time() - c0)
-            wall.append(time.perf_counter() - w0)
-            view.memory.drain_as_bytes()
-        print(f"\nlog_estimate 48 pairs x 150 f: first {1e3 * wall[0]:.0f} ms wall; then median "
-              f"{1e3 * statistics.median(cpu[1:]):.1f} ms CPU / {1e3 * statistics.median(wall[1:]):.1f} ms wall")
-        assert statistics.median(cpu[1:]) < 0.1
+            view.flush()
+            sizes.append(len(view.memory.drain_as_bytes()))
+        # every update carries its 48 x 3 curves of 150 points (float32 x, y: > 48 x 3 x 150 x 8 bytes)
+        assert all(size > 48 * 3 * 150 * 8 for size in sizes), sizes
     finally:
         view.close()
 

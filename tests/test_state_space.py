@@ -8,7 +8,6 @@ Cramer-Rao bounds (raw normalisation, calibrated by the Monte-Carlo test at the 
 
 import copy
 import json
-import time
 
 import numpy as np
 import pytest
@@ -280,16 +279,14 @@ def cruise_fit(cruise):
     case, frs = cruise
     model = StateSpaceModel.from_table(case.tables["state_space"], str(case.path))
     pairs, skipped = select_pairs(frs, model)
-    t0 = time.perf_counter()
     fit = fit_state_space(model, pairs, skipped_pairs=skipped)
-    elapsed = time.perf_counter() - t0
-    return model, pairs, fit, elapsed
+    return model, pairs, fit
 
 
 def test_cruise_recovers_tables_2_1_and_2_2(cruise_fit):
-    model, pairs, fit, elapsed = cruise_fit
+    """The fit's speed (under 5 s) is benchmarks/bench_state_space.py's: no timing here."""
+    model, pairs, fit = cruise_fit
     print("\n" + _report(fit, CRUISE_TRUTH))
-    print(f"  fit of {len(pairs)} pairs, {model.free.size} parameters, with CR bounds: {elapsed:.3f} s")
     assert len(pairs) == 8 and not fit.skipped_pairs
     assert fit.converged, fit.message
     assert fit.cost_average <= 50
@@ -301,17 +298,13 @@ def test_cruise_recovers_tables_2_1_and_2_2(cruise_fit):
         assert q.cramer_rao >= q.insensitivity * (1 - 1e-9)
     # the identified modes are the truth's (Dutch roll, roll, spiral)
     assert_roots_close(fit.eigenvalues, xv15_cruise().eigenvalues(), atol=0.08)
-    assert elapsed < 5.0
 
 
 def test_cruise_structure_reduction_removes_a_true_zero_and_keeps_the_real_ones(cruise_fit):
-    model, pairs, fit, _ = cruise_fit
-    t0 = time.perf_counter()
+    model, pairs, fit = cruise_fit
     red = reduce_structure(model, pairs, fit)
-    elapsed = time.perf_counter() - t0
     print("\n" + "\n".join(str(s) for s in red.removed))
     print(_report(red, CRUISE_TRUTH))
-    print(f"  reduction: {elapsed:.3f} s")
     removed = set(red.removed_parameters)
     assert removed & {"Lr", "Yda"}, red.removed
     # only truly-zero or (seed CR% 31 %) weakly determined Yp may go
@@ -338,7 +331,7 @@ def test_cruise_structure_reduction_removes_a_true_zero_and_keeps_the_real_ones(
 
 
 def test_a_fit_that_does_not_converge_says_so(cruise_fit):
-    model, pairs, _, _ = cruise_fit
+    model, pairs, _ = cruise_fit
     fit = fit_state_space(model, pairs, max_nfev=2)
     assert fit.converged is False
     assert "did not converge" in fit.message and "2 cost evaluations" in fit.message
@@ -346,7 +339,7 @@ def test_a_fit_that_does_not_converge_says_so(cruise_fit):
 
 
 def test_lm_and_multistart_agree(cruise_fit):
-    model, pairs, fit, _ = cruise_fit
+    model, pairs, fit = cruise_fit
     lm = fit_state_space(model, pairs, method="lm")
     assert lm.converged and lm.cost_average == pytest.approx(fit.cost_average, rel=1e-5)
     far = model.theta({"Lp": -2.0, "Nr": -0.2, "Yr": 40.0})
@@ -358,7 +351,7 @@ def test_lm_and_multistart_agree(cruise_fit):
 
 def test_equation_error_start_when_the_case_gives_no_values(cruise, cruise_fit):
     _, frs = cruise
-    _, _, fit, _ = cruise_fit
+    _, _, fit = cruise_fit
     table = _table(CRUISE)
     table["parameters"] = {name: {} for name in table["parameters"]}
     model = StateSpaceModel.from_table(table)

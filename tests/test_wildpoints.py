@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 
@@ -145,14 +143,16 @@ def test_smooth_clean_signal_no_false_positives_isolated_spike_caught():
     np.testing.assert_allclose(y[[200, 3000, 5800]], x[[200, 3000, 5800]], atol=0.02)
 
 
-def test_speed_twenty_thousand_samples():
+def test_twenty_thousand_samples_in_one_call():
+    """A record of 20 000 samples goes through in one call and its spikes are found (the speed is
+    benchmarks/bench_wildpoints.py's, against scipy's running median: no timing here)."""
     rng = np.random.default_rng(0)
     x = np.sin(np.arange(20000) * 0.01) + 0.05 * rng.standard_normal(20000)
-    replace_wild_points(x)  # warm-up
-    t0 = time.perf_counter()
-    replace_wild_points(x)
-    elapsed = time.perf_counter() - t0
-    assert elapsed < 0.25  # measured about 20 ms; generous for loaded CI machines
+    spikes = [1234, 9876, 15000]
+    x[spikes] += 2.0
+    y, rep = replace_wild_points(x)
+    np.testing.assert_array_equal(rep.indices, spikes)              # no false alarm in 20 000 noisy samples
+    assert np.all(np.abs(y[spikes] - np.sin(np.array(spikes) * 0.01)) < 0.3)
 
 
 def test_short_and_degenerate_inputs():
