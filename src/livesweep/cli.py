@@ -663,20 +663,10 @@ def cmd_monitor(args) -> int:
 
 
 def _recorded_settings(log: str):
-    """The monitor settings a recording was made with (its ``livesweep_settings.json``), or None."""
-    import json
+    """The monitor settings a recording was made with, or None (:func:`livesweep.monitor.session.recorded_settings`)."""
+    from livesweep.monitor.session import recorded_settings
 
-    from livesweep.monitor.pipeline import MonitorSettings
-    from livesweep.telemetry.mcap_log import read_attachments
-
-    raw = read_attachments(log).get("livesweep_settings.json")
-    if raw is None:
-        return None
-    try:
-        d = json.loads(raw)
-    except ValueError as e:
-        raise ConfigError(f"{log}: livesweep_settings.json is not JSON ({e}); give --case or --map") from None
-    return MonitorSettings.from_dict(d, where=f"{log}: livesweep_settings.json", path=log)
+    return recorded_settings(log)
 
 
 def cmd_replay(args) -> int:
