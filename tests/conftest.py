@@ -1,6 +1,11 @@
-"""Fixtures shared by the test modules, and the ``slow`` marker.
+"""Fixtures shared by the test modules.
 
 ``pytest -m "not slow"`` is the quick run for daily work; the README's command runs everything.
+A test is marked ``slow`` (``@pytest.mark.slow`` on it, or ``pytestmark`` when every test of its
+module is) by what it costs, never by the file it is in: the rule is the marker's description in
+pyproject.toml. A module-scoped fixture counts toward the first test of the quick run that uses
+it, so a fixture over the threshold makes all its users slow. The session fixtures below (one
+identification of the XV-15 cruise case) are paid once by whichever test needs them first.
 """
 
 from pathlib import Path
@@ -8,16 +13,6 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-
-#: Modules whose tests are mostly live pipelines, subprocesses, simulations or residual loops
-#: (measured: each over ~10 s of the suite's time); the quick run leaves them out.
-SLOW_MODULES = {
-    "test_live_ardupilot.py", "test_residual_loop.py", "test_cli.py", "test_monitor.py", "test_online_estimator.py",
-    "test_maps.py", "test_test_points.py", "test_stream_log.py", "test_monitor_hardening.py",
-    "test_identify_residual_cli.py", "test_replay_logs.py", "test_identify_frequency_response.py",
-    "test_library_face.py", "test_batch.py", "test_convert_damage.py", "test_foxglove.py", "test_convert_mavlink.py",
-}
-
 
 _CACHE_DIR = None
 
@@ -39,13 +34,6 @@ def pytest_unconfigure(config):
 
     if _CACHE_DIR is not None:
         shutil.rmtree(_CACHE_DIR, ignore_errors=True)
-
-
-def pytest_collection_modifyitems(config, items):
-    slow = pytest.mark.slow
-    for item in items:
-        if item.path.name in SLOW_MODULES:
-            item.add_marker(slow)
 
 
 class _Said(list):

@@ -71,6 +71,7 @@ def test_mixed_clocks_are_refused():
         GridAligner(sigs, ["x", "y"], 50.0)
 
 
+@pytest.mark.slow
 def test_replayed_log_aligns_like_the_batch_resampler():
     case = load_case(ROOT / "config" / "xv15_cruise_lateral.toml")
     names = ["da", "dr", "p", "r", "ay", "beta"]

@@ -71,6 +71,7 @@ def local_run(cases, tmp_path_factory):
     return {"out": out, "rows": rows, "calls": calls, "reports": reports}
 
 
+@pytest.mark.slow
 def test_local_pool_runs_each_case_like_identify_and_reports_the_broken_one(cases, local_run, tmp_path):
     out, rows = local_run["out"], local_run["rows"]
     assert [r["status"] for r in rows] == ["ok", "ok", "failed"]
@@ -100,6 +101,7 @@ def test_local_pool_runs_each_case_like_identify_and_reports_the_broken_one(case
     assert body[0].split()[:4] == ["cruise", "da", "ok", "2/2"] and body[2].split()[:2] == ["broken", "failed"]
 
 
+@pytest.mark.slow
 def test_resume_skips_current_cases_and_reruns_changed_or_forced_ones(cases, local_run):
     out = local_run["out"]
     before = {p: p.stat().st_mtime_ns for p in out.rglob("report.json")}
@@ -125,6 +127,7 @@ def test_resume_skips_current_cases_and_reruns_changed_or_forced_ones(cases, loc
     assert fingerprint(cases["b"], STAGE) != fingerprint(cases["b"], "transfer-functions")
 
 
+@pytest.mark.slow
 def test_dask_cluster_gives_the_local_numbers(cases, local_run, tmp_path):
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
@@ -160,6 +163,7 @@ def test_fingerprint_follows_log_content_not_its_mtime(cases, tmp_path):
     assert fingerprint(case, STAGE) != fp
 
 
+@pytest.mark.slow
 def test_cli_progress_table_exit_code_and_clashing_names(cases, local_run, tmp_path, capsys):
     # two broken cases with the same name: their own folders; failures are rows, not exceptions
     twin = tmp_path / "twin.toml"

@@ -69,6 +69,7 @@ def test_message_and_system_ids_from_the_headers_are_pymavlinks(signed):
     assert frame_heads(bytes(v1.pack(m1, force_mavlink1=True))) == [(0, 0)]   # id 0 from system 0
 
 
+@pytest.mark.slow
 def test_every_datagram_is_recorded_as_received_and_test_point_evidence_is_never_shed(tmp_path):
     """An analysis that takes nothing for a while (a busy machine): the recorder records every
     datagram byte for byte and decoded, skips data for the analysis (counted), and holds back the
@@ -126,6 +127,7 @@ def test_a_port_already_taken_is_refused_with_one_line(tmp_path):
     assert not (tmp_path / "b.mcap").exists()
 
 
+@pytest.mark.slow
 def test_the_kernel_buffer_holds_about_a_second_of_the_measured_stream(tmp_path):
     """A kill loses what waits in the kernel's buffer: once the rate is known the recorder sizes it to
     ``KILL_LOSS_S`` of the stream, as the kernel charges datagrams (checked here by filling a socket
@@ -167,6 +169,7 @@ def test_the_kernel_buffer_holds_about_a_second_of_the_measured_stream(tmp_path)
     assert held / rate == pytest.approx(KILL_LOSS_S, rel=0.35)
 
 
+@pytest.mark.slow
 def test_a_kill_under_load_loses_at_most_the_promised_seconds(tmp_path):
     """SIGKILL to the monitor and its recorder while 3 000 datagrams/s arrive and every core is busy:
     what reached the file is a prefix of what was sent, and the rest is at most ``KILL_LOSS_S`` of

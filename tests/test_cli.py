@@ -7,6 +7,8 @@ import pytest
 
 from livesweep.telemetry.mcap_log import read_summary
 
+pytestmark = pytest.mark.slow                 # every test of this module takes over 1 s
+
 
 def livesweep(*args, cwd=None):
     return subprocess.run([sys.executable, "-m", "livesweep", *args], capture_output=True, text=True, cwd=cwd, timeout=300)

@@ -8,6 +8,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+pytestmark = pytest.mark.slow                 # every test of this module takes over 1 s
+
 ROOT = Path(__file__).resolve().parents[1]
 
 _PROBE = """

@@ -49,6 +49,7 @@ def _block(stdout: str, head: str) -> list[str]:
 # repairs: readable lines, never a Python dict
 # ------------------------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_identify_prints_the_repairs_as_sentences_and_leaves_no_lock_file(tmp_path):
     from livesweep.sim.effects import make_effect
     from livesweep.sim.scenario import simulate, sweep_scenario
@@ -83,6 +84,7 @@ def test_identify_prints_the_repairs_as_sentences_and_leaves_no_lock_file(tmp_pa
     assert not (out / LOCK_NAME).exists()
 
 
+@pytest.mark.slow
 def test_replay_prints_the_aligners_counts_as_words(tmp_path):
     log = tmp_path / "d.mcap"
     rc, _, stderr = run("sim", "--manoeuvre", "doublet", "--axis", "da", "--seed", "3",

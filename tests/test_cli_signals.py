@@ -93,6 +93,7 @@ def _assert_stopped_clean(proc, out: Path, err: str, sig, *, warnings: bool = Fa
     assert sorted(p.name for p in out.parent.iterdir() if p.name.startswith(out.name)) == []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
 def test_a_signal_while_converting_leaves_no_partial_file(big_csv, tmp_path, sig):
     src, cmap = big_csv
@@ -102,6 +103,7 @@ def test_a_signal_while_converting_leaves_no_partial_file(big_csv, tmp_path, sig
     _assert_stopped_clean(proc, out, err, sig)
 
 
+@pytest.mark.slow
 def test_a_signal_ignored_from_the_start_stays_ignored(big_csv, tmp_path):
     src, cmap = big_csv
     out = tmp_path / "out.mcap"
@@ -112,7 +114,8 @@ def test_a_signal_ignored_from_the_start_stays_ignored(big_csv, tmp_path):
 
 
 @pytest.mark.parametrize("rel", ["ardupilot_sitl_systemid/sid_axis7_rate_roll.bin",
-                                 "mavlink_tlog/uavlogviewer_autotest_flight_logs.tlog", "px4_ulog/sample.ulg"])
+                                 pytest.param("mavlink_tlog/uavlogviewer_autotest_flight_logs.tlog", marks=pytest.mark.slow),
+                                 "px4_ulog/sample.ulg"])
 def test_sigterm_while_converting_a_real_log(tmp_path, rel):
     base = _shared_data()
     if base is None or not (base / rel).is_file():

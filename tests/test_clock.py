@@ -100,6 +100,7 @@ def spec(name, topic):
     return SignalSpec(name=name, topic=topic, field="x", stamp="t", stamp_scale=1e-6)
 
 
+@pytest.mark.slow
 def test_the_aligner_memory_is_bounded_whatever_the_stamps_say():
     """Back-steps and 1-3 h jumps mixed into two signals' stamps, a signal on the UNIX epoch next to
     one on the boot clock, and a signal 116 days ahead: no block is longer than max_fill_s and no

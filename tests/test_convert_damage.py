@@ -48,6 +48,7 @@ def csv(tmp_path):
     return src
 
 
+@pytest.mark.slow
 def test_the_source_is_never_the_output_even_through_links_or_force(tmp_path, csv):
     before = _sha(csv)
     (tmp_path / "sym.csv").symlink_to(csv)
@@ -173,6 +174,7 @@ def test_a_log_that_is_mostly_corruption_is_refused_unless_partial(tmp_path, ape
 TRUNCATED = DATA / "ardupilot_dataflash" / "backend_log_80k_truncated_ac462.bin"
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not TRUNCATED.is_file(), reason=f"third-party log not found: {TRUNCATED}")
 def test_damage_fuzz_never_gives_a_traceback(tmp_path):
     data = TRUNCATED.read_bytes()

@@ -373,6 +373,7 @@ def trunc(tmp_path_factory):
     return convert(TRUNC, out), out
 
 
+@pytest.mark.slow
 def test_dataflash_counts_per_type_match_dfreader(ape, ape_ref, trunc):
     res, out = ape
     _, counts, _ = ape_ref
@@ -386,6 +387,7 @@ def test_dataflash_counts_per_type_match_dfreader(ape, ape_ref, trunc):
     assert tres.topics == {f"/dataflash/{t}": n for t, n in tcounts.items()}
 
 
+@pytest.mark.slow
 def test_dataflash_multiplier_and_units_from_fmtu(ape, ape_ref):
     """CTUN.CRt is int16 with FMTU unit 'n' (m/s) and multiplier 'B': stored value = raw * MULT['B']."""
     res, out = ape
@@ -418,6 +420,7 @@ def test_dataflash_multiplier_and_units_from_fmtu(ape, ape_ref):
     assert json.loads(channel_info(out)["/dataflash/ATT"][2]["units"])["Roll"] == "deg"
 
 
+@pytest.mark.slow
 def test_dataflash_gps_time_base_matches_dfreader_clock(ape, ape_ref):
     """log_time is UNIX time from the GPS week/ms (as DFReader's own clock), publish_time is TimeUS."""
     res, out = ape
@@ -431,6 +434,7 @@ def test_dataflash_gps_time_base_matches_dfreader_clock(ape, ape_ref):
     assert 1_588_000_000 < att["t_ns"][0] / 1e9 < 1_589_000_000         # 2020-05, the log's date
 
 
+@pytest.mark.slow
 def test_dataflash_provenance_metadata(ape):
     res, out = ape
     meta = read_metadata(out)
@@ -444,6 +448,7 @@ def test_dataflash_provenance_metadata(ape):
     assert json.loads(conv["skipped"]) == {} and json.loads(conv["warnings"]) == []
 
 
+@pytest.mark.slow
 def test_truncated_log_ends_cleanly(trunc):
     """The 80 kB log cut mid-message: a truncated_tail skip and a warning, no exception."""
     res, out = trunc
@@ -474,6 +479,7 @@ def autotest_ref(jobs):
     return jobs["pymavlink_autotest"].result()
 
 
+@pytest.mark.slow
 def test_autotest_tlog_systems_and_bad_data_vs_pymavlink(autotest, autotest_ref):
     """pymavlink finds three sources, (1,1), (250,250) and (0,0), and 140 BAD_DATA.
 
@@ -511,6 +517,7 @@ def test_autotest_tlog_systems_and_bad_data_vs_pymavlink(autotest, autotest_ref)
     assert res["format"] == "tlog" and res["format_version"] == "MAVLink 2"
 
 
+@pytest.mark.slow
 def test_autotest_tlog_counts_per_type_vs_pymavlink(autotest, autotest_ref):
     res, out = autotest
     ref = {t: n for t, n in autotest_ref["types"].items() if t != "BAD_DATA" and not t.startswith("UNKNOWN_")}
@@ -521,6 +528,7 @@ def test_autotest_tlog_counts_per_type_vs_pymavlink(autotest, autotest_ref):
     assert read_summary(out).message_counts == res["topics"]
 
 
+@pytest.mark.slow
 def test_autotest_attitude_equals_pymavlink(autotest, autotest_ref):
     """Every converted ATTITUDE equals pymavlink's (float32-exact), with the tlog time and the
     vehicle time as log_time and publish_time, also across the SITL's reboot (time_boot_ms steps
@@ -544,6 +552,7 @@ def test_autotest_attitude_equals_pymavlink(autotest, autotest_ref):
     assert fallback == [] and len(steps_back) == 1
 
 
+@pytest.mark.slow
 def test_tlog_channels_are_what_the_live_recorder_writes(autotest):
     """Same topics, schema names and schemas as McapRecorder (mavlink_codec.json_schema)."""
     res, out = autotest
@@ -580,6 +589,7 @@ def h1(x, y, fs, nperseg):
     return f, pxy / pxx, np.abs(pxy) ** 2 / (pxx * pyy)
 
 
+@pytest.mark.slow
 def test_sitl_systemid_log_has_sidd_at_400_hz(jobs):
     out, path = _converted(jobs, "sitl", SITL)
     res = out["result"]
@@ -601,6 +611,7 @@ def test_sitl_systemid_log_has_sidd_at_400_hz(jobs):
     np.testing.assert_array_equal(sidd["t_ns"], sidd["TimeUS"].astype(np.int64) * 1000)
 
 
+@pytest.mark.slow
 def test_sitl_frequency_response_matches_readme(jobs):
     _, path = _converted(jobs, "sitl", SITL)
     got = read_topics_fields(path, {"/dataflash/SIDD": ["TimeUS", "Targ", "Gx"],
@@ -620,6 +631,7 @@ def test_sitl_frequency_response_matches_readme(jobs):
 # ============================================================================= PX4 sdlog2
 
 
+@pytest.mark.slow
 def test_trex_px4log_converts(jobs):
     out, path = _converted(jobs, "px4", PX4)
     res = out["result"]

@@ -12,6 +12,8 @@ import pytest
 from livesweep.convert import convert, sniff_format
 from livesweep.telemetry.mcap_log import read_topics_fields
 
+pytestmark = pytest.mark.slow                 # every test of this module takes over 1 s
+
 _REL = Path("shared") / "data" / "crazyflie_multisine" / "multisine_20251017_run1.parquet"
 DATA = next((p for p in (Path(__file__).resolve().parents[2] / _REL, Path("/work") / _REL) if p.is_file()), None)
 

@@ -136,6 +136,7 @@ def test_conversion_metadata_records_source_hash_and_counts(xplane_npy):
     assert read_attachments(res.output)["column_map.toml"] == (CONFIG / "xplane_c172_columns.toml").read_bytes()
 
 
+@pytest.mark.slow
 def test_dat_text_converts_to_the_same_messages_as_npy(xplane_npy, xplane_dat):
     (_, a), (_, b) = xplane_npy, xplane_dat
     assert b.format == "text" and "tab-separated" in b.format_version
@@ -165,6 +166,7 @@ def test_dat_without_column_map_uses_its_header_and_skips_the_preamble(work):
 # X-Plane: identify end to end against scipy
 # ---------------------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_identify_q_de_agrees_with_independent_scipy_welch(xplane_npy, xplane_report):
     src, _ = xplane_npy
     report, out = xplane_report
@@ -203,6 +205,7 @@ def test_identify_q_de_agrees_with_independent_scipy_welch(xplane_npy, xplane_re
     assert np.median(C[band]) >= 0.95
 
 
+@pytest.mark.slow
 def test_identify_short_period_transfer_function(xplane_report):
     report, _ = xplane_report
     tf = next(t for t in report["transfer_functions"] if t["name"] == "q_de")
@@ -220,6 +223,7 @@ def test_identify_short_period_transfer_function(xplane_report):
     assert len(tf["poles"]) == 2 and all(re < 0 and im != 0 for re, im in tf["poles"])
 
 
+@pytest.mark.slow
 def test_identify_theta_q_kinematics_pass_on_the_converted_table(xplane_report):
     report, _ = xplane_report
     checks = report["data_quality"]["kinematic_checks"]
@@ -274,6 +278,7 @@ def test_nonfinite_cells_and_backward_time_are_counted_rows_kept_in_file_order(w
 # PX4 ULog
 # ---------------------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_ulog_sample_counts_per_topic_equal_pyulog(sample_ulg):
     pyulog = _pyulog()
     src, res = sample_ulg
@@ -329,6 +334,7 @@ def test_ulog_multi_instance_topics_go_to_separate_channels(small_ulg):
     assert res.skipped == {"dropout_events": 1}
 
 
+@pytest.mark.slow
 def test_px4_case_roll_rate_frequency_response(work, sample_ulg):
     _, res = sample_ulg
     case = work / "px4_sample_roll.toml"

@@ -276,6 +276,7 @@ def _objects_at(obj, path: str) -> list[dict]:
     return [o for o in found if isinstance(o, dict)]
 
 
+@pytest.mark.slow
 def test_report_json_keys_are_documented(cruise_report):
     report = json.loads((cruise_report / "report.json").read_text())
     checked = set()
@@ -304,6 +305,7 @@ def test_report_json_keys_are_documented(cruise_report):
         assert must in checked, f"outputs.md has no Keys line for report.json {must or 'top level'}"
 
 
+@pytest.mark.slow
 def test_report_folder_files_are_documented(cruise_report):
     sections = {s["text"]: s for s in _sections(DOCS / "outputs.md")}
     frs = json.loads((cruise_report / "frequency_response_set.json").read_text())

@@ -24,6 +24,8 @@ from livesweep.telemetry.recorder import McapRecorder
 from livesweep.telemetry.replay import McapReplaySource
 from livesweep.telemetry.stream_log import dataflash_messages
 
+pytestmark = pytest.mark.slow                 # every test of this module takes over 1 s
+
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" if (ROOT.parent / "shared" / "data").is_dir() else Path("/work/shared/data")
 SID7 = DATA / "ardupilot_sitl_systemid" / "sid_axis7_rate_roll.bin"

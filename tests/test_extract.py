@@ -177,6 +177,7 @@ def test_explicit_sysid_overrides_the_vehicle_lock_for_its_own_frames():
     assert al3.signal_counts["c3"]["filtered"] == 400 and al3.system is None     # nothing locked
 
 
+@pytest.mark.slow
 def test_sysid_selection_on_a_real_three_system_tlog_matches_pymavlink(tmp_path):
     """The autotest tlog holds systems 1, 250 and 0; TIMESYNC comes from 1 and 250. A signal with
     sysid = 250 gets exactly system 250's TIMESYNC ts1 values as pymavlink reads them, offline and live."""
@@ -208,6 +209,7 @@ def test_sysid_selection_on_a_real_three_system_tlog_matches_pymavlink(tmp_path)
 # ----------------------------------------------------------------------------- one path, live = offline
 
 
+@pytest.mark.slow
 def test_live_aligner_equals_offline_reader_on_the_same_recording():
     """The simulated cruise sweep log: an expression signal (a servo mix) and a scaled rate, pushed
     frame by frame through the aligner, equal the offline reader's samples interpolated at the

@@ -33,6 +33,7 @@ def _mavlink_frames(path) -> int:
                if ch.topic.startswith("/mavlink/"))
 
 
+@pytest.mark.slow
 def test_no_command_replaces_a_recording_in_progress(tmp_path):
     port = free_udp_port()
     out = tmp_path / "X.mcap"

@@ -7,6 +7,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 from mcap.reader import make_reader
 
 from livesweep.config import read_channel_map
@@ -59,6 +60,7 @@ def _resolve(msg, path: str):
     return items
 
 
+@pytest.mark.slow
 def test_layout_paths_resolve_in_a_recording_and_estimates_carry_the_responses(tmp_path):
     out, s, pipe = _record(tmp_path)
     msgs, schemas = _messages(out)

@@ -33,6 +33,8 @@ from livesweep.convert import convert
 from livesweep.pipeline.frequency_response import run_frequency_response_stage
 from livesweep.telemetry.mcap_log import read_topics_fields
 
+pytestmark = pytest.mark.slow      # every test shares the module's SITL log fixture, over 1 s
+
 SITL = Path(__file__).resolve().parents[2] / "shared" / "data" / "ardupilot_sitl_systemid" / "sid_axis7_rate_roll.bin"
 SIDD_RATE_HZ = 400.0
 BAND_RAD_S = (2.5, 70.0)                 # 0.4-11 Hz, inside the chirp's 0.5-12 Hz

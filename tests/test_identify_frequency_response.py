@@ -41,6 +41,7 @@ def cruise_report(tmp_path_factory):
     return out, json.loads((out / "report.json").read_text()), r.stdout
 
 
+@pytest.mark.slow
 def test_report_holds_every_pair_in_the_design_form(cruise_report):
     out, rep, stdout = cruise_report
     frs = rep["frequency_responses"]
@@ -59,6 +60,7 @@ def test_report_holds_every_pair_in_the_design_form(cruise_report):
     assert "p/da" in stdout and "wrote" in stdout
 
 
+@pytest.mark.slow
 def test_reported_responses_match_the_true_model_within_their_random_error(cruise_report):
     """The sample logs were simulated from the seed's tables: 94 % of the magnitude and phase points
     with gamma^2 >= 0.6 lie within 2 random errors of the true response (measured 91-97 % per pair)."""
@@ -81,6 +83,7 @@ def test_reported_responses_match_the_true_model_within_their_random_error(cruis
     assert min(p_da["coherence"]) > 0.6        # the roll sweep excites p/da over the whole 0.3-20 rad/s
 
 
+@pytest.mark.slow
 def test_data_quality_of_clean_sample_logs(cruise_report):
     _, rep, _ = cruise_report
     dq = rep["data_quality"]
@@ -114,6 +117,7 @@ sample_rate_hz = 50.0
     return case
 
 
+@pytest.mark.slow
 def test_injected_skew_scale_spikes_and_dropouts_are_found_and_counted(tmp_path):
     effects = (make_effect("sensor_skew", output="p", delay_s=0.05),
                make_effect("scale_factor", output="phi", factor=1.10),
@@ -156,6 +160,7 @@ def test_missing_channel_or_field_is_a_clear_error(tmp_path, mutate, message):
     assert r.returncode == 2 and message in r.stderr and "Traceback" not in r.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kwargs, message", [
     (dict(band="[0.3, 200.0]"), "Nyquist"),
     (dict(band="[0.01, 20.0]", windows="[7.0, 100.0]"), "resolves only from"),
@@ -167,6 +172,7 @@ def test_bad_spectral_settings_name_the_limit(tmp_path, kwargs, message):
     assert r.returncode == 2 and message in r.stderr and "Traceback" not in r.stderr
 
 
+@pytest.mark.slow
 def test_constant_input_is_refused_by_name(tmp_path):
     sig = SIGNALS.replace('field = "servo1_raw"', 'field = "servo2_raw"')   # elevator: never moves
     case = write_case(tmp_path, ROOT / "replay_logs" / "xv15_cruise_sweeps_da.mcap", signals=sig)
@@ -174,6 +180,7 @@ def test_constant_input_is_refused_by_name(tmp_path):
     assert r.returncode == 2 and "constant" in r.stderr and "da" in r.stderr
 
 
+@pytest.mark.slow
 def test_full_euler_kinematics_are_used_when_every_rate_and_angle_is_logged(tmp_path):
     """Large attitudes (phi to 40 deg, theta to 25 deg) on a generic JSON log: with p, q, r, phi and
     theta the check integrates the 3-2-1 Euler rates and passes; phi against p alone would not."""
@@ -211,6 +218,7 @@ def test_full_euler_kinematics_are_used_when_every_rate_and_angle_is_logged(tmp_
     assert not naive.passed
 
 
+@pytest.mark.slow
 def test_the_full_response_set_is_saved_for_later_stages(cruise_report):
     from livesweep.report.writer import load_response_set
 
@@ -225,6 +233,7 @@ def test_the_full_response_set_is_saved_for_later_stages(cruise_report):
     assert not ordinary.conditioned
 
 
+@pytest.mark.slow
 def test_doublets_are_called_pulse_like_and_sweeps_are_not():
     """The data-quality section says why doublets give poor spectra: their input power falls far
     faster across the band than a sweep's (theory for a constant-amplitude exponential sweep:

@@ -20,6 +20,7 @@ def full_report(cruise_report_dir):
     return cruise_report_dir
 
 
+@pytest.mark.slow
 def test_every_stage_ran_and_showed_progress(full_report):
     out, rep, stdout = full_report
     assert rep["stages"] == ["frequency-response", "transfer-functions", "state-space", "verification", "residual-loop"]
@@ -34,6 +35,7 @@ def test_every_stage_ran_and_showed_progress(full_report):
     assert (out / rep["verification"]["records"][0]["plot"]).read_bytes().startswith(b"<svg ")
 
 
+@pytest.mark.slow
 def test_transfer_function_p_da_matches_the_model_high_frequency_gain_and_delay(full_report):
     _, rep, _ = full_report
     tf = next(t for t in rep["transfer_functions"] if t["name"] == "p_da")
@@ -69,6 +71,7 @@ def test_identified_model_passes_verification_on_the_calm_air_doublets(full_repo
     assert all(o["tic"] <= 0.25 for o in v["outputs"])
 
 
+@pytest.mark.slow
 def test_hover_state_space_stage_fixes_the_unmeasurable_and_removes_the_true_zeros():
     """Hover stage as `livesweep identify` runs it (shipped logs, pilot loop, responses through the
     logged sweep injections): Ldr and Ydr (no coherent pair) are fixed a priori, the reduction
@@ -108,6 +111,7 @@ def test_handling_qualities_of_measured_and_fitted_p_da_agree_with_the_true_mode
         assert hq[src]["bandwidth_rad_s"] == pytest.approx(truth["bandwidth_rad_s"], rel=0.1), src
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("old, new, message", [
     ('"Yr - U0"', '"Yr - U1"', "unknown name 'U1'"),
     ('M = [["1","0","0","0"], ["0","1","0","0"]', 'M = [["1","0","0","0"], ["1","0","0","0"]', "singular"),

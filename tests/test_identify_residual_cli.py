@@ -16,6 +16,8 @@ from livesweep.sim.effects import make_effect
 from livesweep.sim.scenario import simulate, sweep_scenario, verification_scenario
 from livesweep.telemetry.sim_telemetry import write_sim_log
 
+pytestmark = pytest.mark.slow                 # every test of this module takes over 1 s
+
 ROOT = Path(__file__).resolve().parents[1]
 SKEW_S = 0.06
 

@@ -44,6 +44,7 @@ def _sid(log: Path) -> dict:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("log", LOGS, ids=lambda p: p.stem)
 def test_the_chirp_is_the_one_arducopter_logged_it_injected(log):
     """From the SID_* parameters alone: the injected signal equals SIDD.Targ to float32 precision
@@ -63,6 +64,7 @@ def test_the_chirp_is_the_one_arducopter_logged_it_injected(log):
     assert time_s[live][-1] == pytest.approx(inj.duration_s, abs=0.01)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("log", LOGS, ids=lambda p: p.stem)
 def test_sids_and_the_parameters_give_the_same_sweep(log):
     """The SIDS record at a start and the SID_* parameters the vehicle sent before it describe one chirp."""

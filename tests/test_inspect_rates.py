@@ -33,6 +33,15 @@ LOGS = sorted(p for p in DATA.rglob("*") if p.is_file() and p.suffix.lower() != 
     if DATA.is_dir() else []
 PRESETS = ROOT / "src" / "livesweep" / "data" / "maps"
 pytestmark = pytest.mark.skipif(not LOGS, reason="../shared/data is not here")
+#: logs whose tests here take over 1 s on 2 cores (inspecting them, and reading their rates
+#: independently): those parameters are marked slow, the others run in the quick run
+SLOW_LOGS = {"sid_axis7_rate_roll.bin", "sid_axis8_rate_pitch.bin", "uavlogviewer_autotest_flight_logs.tlog",
+             "2016-09-08_10_32_26.px4log"}
+
+
+def _by_cost(logs):
+    """``logs`` as test parameters named by file, the ones of :data:`SLOW_LOGS` marked slow."""
+    return [pytest.param(p, id=p.name, marks=[pytest.mark.slow] if p.name in SLOW_LOGS else []) for p in logs]
 os.environ.setdefault("MAVLINK20", "1")
 
 
@@ -132,7 +141,7 @@ def _need_hz(preset: dict, sid_top_hz: float | None) -> float:
     return 2.5 * top
 
 
-@pytest.mark.parametrize("log", LOGS, ids=lambda p: p.name)
+@pytest.mark.parametrize("log", _by_cost(LOGS))
 def test_no_preset_is_suggested_whose_signals_the_log_sends_too_slowly(inspections, log):
     ins = _inspect(inspections, log)
     sid_top = _systemid_top_hz(log, ins.format)
@@ -153,7 +162,7 @@ _SLOW = re.compile(r"(\w+) \((\w+)\) (?:arrives at|at) ([0-9.e+]+) Hz")
 _NEEDS = re.compile(r"needs ([0-9.e+]+) Hz$")
 
 
-@pytest.mark.parametrize("log", LOGS, ids=lambda p: p.name)
+@pytest.mark.parametrize("log", _by_cost(LOGS))
 def test_a_preset_refused_as_too_slow_names_the_logs_rates_and_the_bands_need(inspections, log):
     """The rates a refusal quotes are the log's (its own reader, within 15 %), and the rate needed
     is 2.5 x the top of the band the preset declares (or the log's SystemID band)."""
@@ -196,6 +205,7 @@ def test_the_quadplane_tlog_at_4_hz_is_not_given_the_plane_preset(inspections):
 
 # ----------------------------------------------------------------------------- SystemID test points
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["sid_axis7_rate_roll.bin", "sid_axis8_rate_pitch.bin"])
 def test_systemid_test_points_are_listed_only_where_the_log_has_their_data(inspections, name):
     """The filtered SystemID logs announce four runs (SIDS) but keep RATE only around one: that one

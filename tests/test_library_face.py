@@ -45,6 +45,7 @@ def notebook():
     return mod.main([])
 
 
+@pytest.mark.slow
 def test_notebook_fit_recovers_the_simulated_system(notebook):
     """p/da = 4 (s + 0.5) / (s^2 + 6 s + 36) e^(-0.04 s): the fit within 3 Cramer-Rao bounds (and 3 %)."""
     fit = notebook["fit"]
@@ -54,6 +55,7 @@ def test_notebook_fit_recovers_the_simulated_system(notebook):
         assert abs(got - want) <= max(3 * cr, 0.03 * want), (key, got, want, cr)
 
 
+@pytest.mark.slow
 def test_to_tf_and_to_frd_agree_with_python_control(notebook):
     fit, data, T, frd = notebook["fit"], notebook["data"], notebook["tf"], notebook["frd"]
     w = np.geomspace(0.3, 40.0, 200)
@@ -75,6 +77,7 @@ def test_to_tf_and_to_frd_agree_with_python_control(notebook):
     assert np.mean(rel <= 3 * np.maximum(data.random_error[ok][coh], 0.01)) >= 0.95
 
 
+@pytest.mark.slow
 def test_to_ss_is_the_identified_model(notebook):
     ident, sys_ = notebook["ident"], notebook["ss"]
     fit = ident.state_space.fit
@@ -91,6 +94,7 @@ def test_to_ss_is_the_identified_model(notebook):
     assert list(sys_.state_labels) == list(fit.model.states) and list(sys_.input_labels) == list(fit.model.inputs)
 
 
+@pytest.mark.slow
 def test_identify_matches_the_command_line_report(cruise_identification, tmp_path):
     """identify() and `livesweep identify` compute the same model; the writer changes nothing."""
     from livesweep import cli
@@ -190,6 +194,7 @@ def test_state_space_model_from_matrices_equals_the_case_table():
                                       parameters={"Lp": -1.0})
 
 
+@pytest.mark.slow
 def test_plot_functions_return_figures_and_leave_the_backend_alone(cruise_identification):
     import matplotlib
     from matplotlib.figure import Figure
@@ -235,6 +240,7 @@ def _imports(path: Path, modules: set) -> set:
     return {m for m in out if m in modules and m != me}
 
 
+@pytest.mark.slow
 def test_no_import_cycle_among_livesweep_modules():
     files = {_module_name(f): f for f in SRC.rglob("*.py")}
     graph = {m: _imports(f, set(files)) for m, f in files.items()}
@@ -283,6 +289,7 @@ def test_docstring_examples_run(module, monkeypatch):
 
 # --- the examples run as a user runs them ------------------------------------------------------
 
+@pytest.mark.slow
 def test_example_identify_case_recovers_the_simulated_aileron_delay(tmp_path):
     """The shipped cruise logs were simulated with a 0.0892 s aileron delay (replay_logs/regenerate.py)."""
     out = subprocess.run([sys.executable, str(ROOT / "examples" / "identify_case.py"), "--out", str(tmp_path)],
@@ -295,6 +302,7 @@ def test_example_identify_case_recovers_the_simulated_aileron_delay(tmp_path):
     assert report["stages"][-1] == "residual-loop" and (tmp_path / "report.html").is_file()
 
 
+@pytest.mark.slow
 def test_example_replay_judges_the_aileron_sweep_go():
     """A da sweep: p/da and phi/da coherent (the verdict GO names p/da as required); p/dr is not excited."""
     out = subprocess.run([sys.executable, str(ROOT / "examples" / "replay_live.py")], capture_output=True, text=True,

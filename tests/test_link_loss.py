@@ -183,6 +183,7 @@ def _fly(items, lose, speed: float = 10.0):
     return summary, ledger
 
 
+@pytest.mark.slow
 def test_a_live_test_point_that_lost_frames_on_the_link_says_so_first():
     """30 % of the vehicle's frames lost at random by the radio from 8 s after the operator's start
     marker to 8 s before the end marker; the same flight without losses as the reference."""
@@ -228,6 +229,7 @@ def _replay_settings():
     return _monitor_settings(build_parser().parse_args(["replay", "x.mcap", "--require", "p/da"]))
 
 
+@pytest.mark.slow
 def test_a_replayed_test_point_that_lost_frames_says_so_first_and_a_no_go_is_the_links(sim_recording):
     """The recording replayed whole is GO with no loss reason; with 27 % of its data frames taken out
     at random over a block of its time that holds the sweep, the first reason is that loss (the

@@ -36,6 +36,8 @@ import pytest
 from helpers import CpuHog, copy_mcap_without
 from livesweep.telemetry.mcap_log import read_messages
 
+pytestmark = pytest.mark.slow      # every test shares the module's live runs: minutes of paced streams
+
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 if not DATA.is_dir():
     DATA = Path("/work/shared/data")

@@ -59,6 +59,7 @@ def test_the_owner_removes_the_lock_file_when_it_is_done(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_a_finished_batch_leaves_no_lock_file(tmp_path):
     out = tmp_path / "batch"
     out.mkdir()
@@ -121,6 +122,7 @@ print(owned, together)
 """
 
 
+@pytest.mark.slow
 def test_processes_contending_for_a_folder_never_own_it_together(tmp_path):
     """Four processes take and release the folder's lock as fast as they can, the lock file deleted
     at every release: never two owners at once, and no lock file left at the end."""

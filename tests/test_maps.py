@@ -151,6 +151,7 @@ def test_motor_mixes_are_the_least_squares_projection_of_ardupilots_motor_factor
         assert abs(ex.value({**base, **{f"servo{i + 1}_raw": 1500 for i in range(len(motors))}})[0]) < 1e-9
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("log,swept", [(SID7, "roll"), (SID8, "pitch")])
 def test_quad_plus_mix_signs_follow_arducopters_rate_controller_outputs(converted, log, swept):
     """The shared SITL logs fly ArduCopter's QUAD/PLUS frame. The preset's mixes, applied to the
@@ -194,6 +195,7 @@ def _h1(x, y, fs, f_hz):
     return np.interp(f_hz, f, h.real) + 1j * np.interp(f_hz, f, h.imag)
 
 
+@pytest.mark.slow
 def test_dataflash_systemid_preset_reads_400_hz_rates_that_agree_with_pymavlink_and_scipy(converted):
     """ardupilot-sysid-dataflash on the converted sid_axis7 log: every signal resolves; the rates
     come at 400 Hz with pymavlink's values and times; RDes -> R over the SIDD span at 2 Hz is the
@@ -218,6 +220,7 @@ def test_dataflash_systemid_preset_reads_400_hz_rates_that_agree_with_pymavlink_
     assert abs(h) == pytest.approx(0.93, abs=0.01) and math.degrees(np.angle(h)) == pytest.approx(-21.0, abs=1.0)
 
 
+@pytest.mark.slow
 def test_ulog_preset_on_the_px4_sample_reads_what_pyulog_reads(converted):
     """px4-ulog-multicopter on sample.ulg: every signal resolves, with pyulog's values (scaled) and
     time stamps; roll-rate setpoint -> roll rate is coherent (the shared README: about 0.99 over
@@ -237,6 +240,7 @@ def test_ulog_preset_on_the_px4_sample_reads_what_pyulog_reads(converted):
     assert np.median(c[(f >= 0.5) & (f <= 10.0)]) > 0.98
 
 
+@pytest.mark.slow
 def test_plane_and_copter_presets_on_the_quadplane_tlog_read_what_pymavlink_reads(converted):
     """The shared QuadPlane SITL tlog carries SERVO_OUTPUT_RAW and ATTITUDE (MAVLink 1, ~4 Hz):
     ardupilot-plane resolves every signal with pymavlink's values (servo - 1500 us, rad -> deg),
@@ -293,6 +297,7 @@ def test_px4_and_pid_presets_resolve_on_mavlink_records():
         assert ex.value(taken)[0] == pytest.approx(sign * 0.1 * axis * R2D, rel=1e-6)   # rad/s -> deg/s
 
 
+@pytest.mark.slow
 def test_a_preset_runs_through_the_live_aligner(converted):
     """ardupilot-sysid-dataflash through the live aligner on the converted log: 400 Hz grid, every
     signal counted, nothing dropped by the clocks."""
@@ -428,6 +433,7 @@ def livesweep(*args):
     return subprocess.run([sys.executable, "-m", "livesweep", *args], capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_cli_lists_the_presets_and_refuses_bad_map_arguments_in_one_line(tmp_path):
     r = livesweep("maps")
     assert r.returncode == 0, r.stderr
@@ -448,6 +454,7 @@ def test_cli_lists_the_presets_and_refuses_bad_map_arguments_in_one_line(tmp_pat
         assert len(r.stderr.strip().splitlines()) == 1 and re.search(pattern, r.stderr.strip()), r.stderr
 
 
+@pytest.mark.slow
 def test_replay_with_a_preset_analyses_the_presets_pairs():
     """The simulated XV-15 cruise log carries SERVO_OUTPUT_RAW and ATTITUDE, so ardupilot-plane's
     signals resolve on it: the replay estimates exactly the preset's 5 x 3 output/input pairs, and the

@@ -446,6 +446,7 @@ def read_all(src) -> list[Frame]:
     return out
 
 
+@pytest.mark.slow
 def test_autotest_tlog_vs_pymavlink(reference):
     """The awkward autotest log: three sources, console text logged one byte per record.
 

@@ -298,6 +298,7 @@ def _identify(tmp_path: Path, log: str):
                            "--stage", "frequency-response"], capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_identify_reports_a_truncated_log_in_data_quality_notes_and_prints_it(tmp_path):
     full = _sweep_log(tmp_path / "full.mcap")
     cut = tmp_path / "cut.mcap"
@@ -311,6 +312,7 @@ def test_identify_reports_a_truncated_log_in_data_quality_notes_and_prints_it(tm
     assert any("note: " in ln and "unfinished" in ln for ln in r.stdout.splitlines())
 
 
+@pytest.mark.slow
 def test_identify_on_a_crafted_number_is_one_line_exit_2(tmp_path):
     payloads = [json.dumps({"t": k / 50.0, "u": np.sin(k / 10.0), "y": 0.5}).encode() for k in range(500)]
     payloads[123] = b'{"t": 2.46, "u": ' + b"7" * 400 + b', "y": 0.5}'

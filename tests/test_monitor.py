@@ -89,6 +89,7 @@ def live(tmp_path_factory):
     return tmp, pipe, summary, sent
 
 
+@pytest.mark.slow
 def test_every_message_sent_is_received_and_recorded(live):
     tmp, pipe, summary, sent = live
     n_sent = sum(sent.values())
@@ -102,6 +103,7 @@ def test_every_message_sent_is_received_and_recorded(live):
     assert summary["aligner"]["samples_invalid"] == 0 and summary["aligner"]["late_dropped"] == 0
 
 
+@pytest.mark.slow
 def test_live_verdict_and_adequacy_for_the_roll_sweep(live):
     _, pipe, summary, _ = live
     assert summary["verdict"] == "GO"
@@ -115,6 +117,7 @@ def test_live_verdict_and_adequacy_for_the_roll_sweep(live):
     assert (tp["swept_input"], tp["verdict"]) == ("da", "GO") and tp["pairs"][0]["coherence"] == "ordinary"
 
 
+@pytest.mark.slow
 def test_replay_of_the_recording_reproduces_the_live_estimates(live):
     tmp, pipe, _, _ = live
     replay = MonitorPipeline(SETTINGS, [McapReplaySource(tmp / "live.mcap")], keep_estimates=True)
@@ -127,6 +130,7 @@ def test_replay_of_the_recording_reproduces_the_live_estimates(live):
     assert [e.status.verdict for e in pipe.estimates] == [e.status.verdict for e in replay.estimates]
 
 
+@pytest.mark.slow
 def test_replay_reproduces_the_test_points_verdicts_and_alerts_exactly(live, tmp_path):
     """What the live run recorded on /livesweep/test_point, /livesweep/verdict and /livesweep/alert
     (the link's own alerts aside: a file has no link), a replay of its recording records again."""
@@ -142,6 +146,7 @@ def test_replay_reproduces_the_test_points_verdicts_and_alerts_exactly(live, tmp
     assert [m.data["verdict"] for m in read_messages(out, topics="/livesweep/verdict")][-1] == "GO"
 
 
+@pytest.mark.slow
 def test_recorded_results_equal_the_live_ones(live):
     tmp, pipe, _, _ = live
     from livesweep.telemetry.mcap_log import read_messages
@@ -153,6 +158,7 @@ def test_recorded_results_equal_the_live_ones(live):
         np.testing.assert_array_equal(np.array(r["coherence"]["p/da"], float), e.coherence[0, 0])
 
 
+@pytest.mark.slow
 def test_rrd_holds_the_time_series_and_the_coherence(live):
     tmp, pipe, _, _ = live
     chunks = RrdReader(tmp / "live.rrd").stream().to_chunks()
@@ -173,6 +179,7 @@ def test_rrd_holds_the_time_series_and_the_coherence(live):
     np.testing.assert_allclose(coh, e.coherence[0, 0], rtol=1e-6, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_zenoh_json_samples_feed_the_monitor(tmp_path):
     import socket
 
@@ -213,6 +220,7 @@ def test_zenoh_json_samples_feed_the_monitor(tmp_path):
     assert max(np.median(e.coherence[0, 0]) for e in pipe.estimates) > 0.8
 
 
+@pytest.mark.slow
 def test_third_party_tlog_runs_through_the_monitor_without_a_crash():
     tlog = shared_data() / "mavlink_tlog" / "uavlogviewer_autotest_flight_logs.tlog"
     src = TlogSource(tlog)
@@ -259,6 +267,7 @@ def _stream_then_kill(out: Path, port: int, victim: str) -> tuple[int, subproces
     return sent, mon
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="finds the recorder process in /proc")
 def test_a_killed_monitor_leaves_a_finished_recording_with_every_frame(tmp_path):
     """SIGKILL of the monitor: its recorder process sees the monitor gone, reads what the socket
@@ -271,6 +280,7 @@ def test_a_killed_monitor_leaves_a_finished_recording_with_every_frame(tmp_path)
     assert s.message_counts["/link/mavlink"] == sent                     # one frame per datagram here
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="finds the recorder process in /proc")
 def test_a_killed_recorder_loses_at_most_a_second_and_the_monitor_says_so(tmp_path):
     """SIGKILL of the recorder process: the file is left unfinished, readable, with at most the
@@ -351,6 +361,7 @@ def test_a_quiet_second_input_falls_back_to_ordinary_responses():
     assert np.max(np.abs(last.magnitude_db[0, 0, good] - 20 * np.log10(np.abs(T[good])))) < 1.0
 
 
+@pytest.mark.slow
 def test_monitor_publishes_results_on_zenoh(tmp_path):
     import socket
 
@@ -400,6 +411,7 @@ def test_monitor_publishes_results_on_zenoh(tmp_path):
     np.testing.assert_array_equal(last["coherence"]["p/da"], pipe.estimates[-1].coherence[0, 0])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("how", ["duration", "sigint"])
 def test_monitor_finishes_the_recording_on_duration_or_ctrl_c(tmp_path, how):
     import socket
@@ -430,6 +442,7 @@ def test_monitor_finishes_the_recording_on_duration_or_ctrl_c(tmp_path, how):
     assert f"wrote {out}" in stdout.decode()
 
 
+@pytest.mark.slow
 def test_replay_of_a_closed_loop_hover_log_uses_the_logged_injection():
     """The shipped hover aileron log (pilot loop; sweep injection logged as DEBUG_VECT) replayed
     with references: the monitor streams the references, and its live p/da through them agrees with

@@ -102,6 +102,7 @@ def sim_stream(seed: int, duration_s: float) -> list[tuple[str, dict]]:
 # ----------------------------------------------------------------------------- the fuzz test
 
 
+@pytest.mark.slow
 def test_fuzz_two_vehicles_garbage_poison_stamps_and_a_forged_frame(tmp_path):
     """With every core busy (a field laptop), about 8 000 datagrams/s of two signed vehicles, garbage,
     corrupted, unsigned, forged and replayed frames and stamps no clock has: every valid frame is
@@ -209,6 +210,7 @@ def _fuzz(tmp_path):
 # ----------------------------------------------------------------------------- stop, overwrite, lock
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
 def test_sigterm_and_sighup_finish_the_recording(tmp_path, sig):
     port = free_udp_port()
@@ -231,6 +233,7 @@ def test_sigterm_and_sighup_finish_the_recording(tmp_path, sig):
     assert f"wrote {out}" in stdout.decode()
 
 
+@pytest.mark.slow
 def test_an_existing_recording_is_not_overwritten_unless_forced(tmp_path):
     out = tmp_path / "flight.mcap"
     out.write_bytes(b"an earlier flight")
@@ -259,6 +262,7 @@ def test_two_recorders_cannot_share_a_file(tmp_path):
     assert read_summary(out).complete
 
 
+@pytest.mark.slow
 def test_a_missing_or_wrong_signing_key_file_is_one_line(tmp_path):
     port = free_udp_port()
     short = tmp_path / "short.key"
@@ -270,6 +274,7 @@ def test_a_missing_or_wrong_signing_key_file_is_one_line(tmp_path):
         assert r.returncode == 2 and r.stderr.count("\n") == 1 and words in r.stderr and str(path) in r.stderr
 
 
+@pytest.mark.slow
 def test_crafted_json_on_zenoh_neither_stops_the_monitor_nor_its_replay(tmp_path):
     """A 400-digit integer in a signal and in the stamp, JSON nested 500 and 5 000 deep, a 5 000-digit
     integer, a bare array: each counted; the valid samples recorded, analysed and replayed."""
@@ -363,6 +368,7 @@ def test_replay_skips_and_counts_damaged_messages(tmp_path):
     assert np.median(pipe.estimates[-1].coherence[0, 0]) > 0.99
 
 
+@pytest.mark.slow
 def test_slow_analysis_sheds_frames_but_the_recording_keeps_every_one(tmp_path):
     """A view that takes 50 ms per call stands for an analysis that cannot keep up: the frames it
     cannot take are skipped and counted, and every frame is still in the recording."""
@@ -428,6 +434,7 @@ def test_a_full_queue_keeps_the_test_point_evidence_in_order_and_counts_what_it_
     assert [f.receive_ns for f in got] == [0, 1, 3, 9] and q.shed == 6
 
 
+@pytest.mark.slow
 def test_sigterm_during_a_zenoh_burst_records_every_sample_it_counted(tmp_path):
     """SIGTERM right after a burst of 100 000 Zenoh samples (real session on loopback): the monitor
     reads what was still in flight, records it, and every sample it counts as received is in the

@@ -46,6 +46,7 @@ def test_percent_of_nothing(bad):
     assert percent(bad, missing="n/a") == "n/a"
 
 
+@pytest.mark.slow
 @settings(max_examples=2000, deadline=None)
 @given(st.floats(0.0, 1.0), st.floats(0.01, 0.99))
 def test_percent_never_crosses_its_threshold(fraction, threshold):
@@ -56,6 +57,7 @@ def test_percent_never_crosses_its_threshold(fraction, threshold):
     assert (text == "0 %") == (fraction == 0.0)                          # none means none
 
 
+@pytest.mark.slow
 @settings(max_examples=2000, deadline=None)
 @given(st.floats(0.0, 1.0), st.floats(0.01, 0.99))
 def test_points_say_the_side_of_the_threshold_and_the_distance(fraction, threshold):

@@ -107,6 +107,7 @@ def test_responses_equal_batch_formulas():
     assert r1.conditioned is None and r1.best is r1.ordinary
 
 
+@pytest.mark.slow
 @settings(max_examples=15, deadline=None)
 @given(sizes=st.lists(st.integers(1, 500), min_size=1, max_size=30), window_s=st.sampled_from([8.0, 13.3, 20.0, 31.0]))
 def test_sliding_window_equals_batch_on_the_last_segments(sizes, window_s):

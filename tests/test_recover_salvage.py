@@ -128,6 +128,7 @@ def _cli(capsys, src: Path, out: Path) -> tuple[int, str]:
     return rc, capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_an_undamaged_recording_copies_whole_and_exits_0(recording, tmp_path, capsys):
     src, out = tmp_path / "flight.mcap", tmp_path / "copy.mcap"
     src.write_bytes(recording)
@@ -140,6 +141,7 @@ def test_an_undamaged_recording_copies_whole_and_exits_0(recording, tmp_path, ca
     assert rc == 0 and "LOST" not in said and "UNVERIFIED" not in said and "nothing" in said
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(4))
 def test_one_flipped_bit_in_a_chunk_in_the_middle(recording, chunks, tmp_path, capsys, seed):
     rng = random.Random(seed)
@@ -194,6 +196,7 @@ def test_twenty_flipped_bits_in_the_first_kilobytes(recording, tmp_path, capsys,
         assert re.search(rf"UNVERIFIED: {r.messages_unverified} messages? kept", said)
 
 
+@pytest.mark.slow
 def test_a_chunk_that_fails_its_crc_is_kept_unverified(recording, chunks, tmp_path, capsys):
     c = chunks[10]
     src, out = tmp_path / "flight.mcap", tmp_path / "out.mcap"
@@ -209,6 +212,7 @@ def test_a_chunk_that_fails_its_crc_is_kept_unverified(recording, chunks, tmp_pa
     assert rc == 1 and "UNVERIFIED" in said and str(c.chunk_start_offset) in said
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("damage", ["opcode", "length"])
 def test_a_chunk_with_damaged_framing_is_found_again(recording, chunks, tmp_path, damage):
     """With the summary (its chunk index) and without it (an unfinished file: the chunk's own fields)."""
@@ -255,6 +259,7 @@ def test_resynchronising_by_scanning_when_there_is_no_summary(recording, chunks,
     assert rc == 1 and "LOST: an unknown number of messages" in said and str(c.chunk_start_offset) in said
 
 
+@pytest.mark.slow
 def test_an_unfinished_recording_cut_mid_chunk(tmp_path, capsys):
     src = tmp_path / "live.mcap"
     n = _record(src, finish=False)

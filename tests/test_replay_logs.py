@@ -72,6 +72,7 @@ def _assert_within_one_quantum(where: str, field: str, got: list, want: list):
         assert np.all(excess <= 1.0), f"{where}: off by up to {excess.max():.3g} float32 ulp"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(SAMPLE_LOGS))
 def test_sample_log_regenerates_within_one_storage_quantum(name, tmp_path):
     """Same topics, messages, record times, metadata and attachments; every stored value within

@@ -125,6 +125,7 @@ def test_replay_refuses_a_crafted_recording_in_one_line(tmp_path, d, key, value)
     assert len(lines) == 1 and f"{rec}: livesweep_settings.json: {key}:" in lines[0] and value in lines[0], r.stderr
 
 
+@pytest.mark.slow
 def test_replay_runs_a_recording_inside_the_limits_and_checks_its_overrides(tmp_path):
     rec = _recording(tmp_path / "rec.mcap", _saved(), n_messages=3000)
     r = _replay(rec)

@@ -58,6 +58,7 @@ def _cells(page: str, first: str) -> list[str]:
     raise AssertionError(f"no table row {first!r}")
 
 
+@pytest.mark.slow
 def test_the_loop_adds_the_notch_and_report_json_signs_the_final_model(notch_report):
     ident, out, rep, _ = notch_report
     model, pre = rep["model"], rep["state_space"]
@@ -81,6 +82,7 @@ def test_the_loop_adds_the_notch_and_report_json_signs_the_final_model(notch_rep
     assert ident.model_before_loop.cost_average == pytest.approx(pre["cost"]["average"], rel=1e-9)
 
 
+@pytest.mark.slow
 def test_exported_final_matrices_reproduce_the_model_drawn(notch_report):
     """scipy's response of report.json's A, B, C, D (input delays applied) is identify()'s final model."""
     ident, _, rep, _ = notch_report
@@ -98,6 +100,7 @@ def test_exported_final_matrices_reproduce_the_model_drawn(notch_report):
     assert "notch_da" in " ".join(m["states"])
 
 
+@pytest.mark.slow
 def test_report_html_summary_tables_and_overlays_carry_the_final_model(notch_report):
     _, out, rep, page = notch_report
     model, pre = rep["model"], rep["state_space"]
@@ -138,6 +141,7 @@ def test_report_html_summary_tables_and_overlays_carry_the_final_model(notch_rep
         assert base64.b64encode(svg.encode()).decode()[:200] in page
 
 
+@pytest.mark.slow
 def test_handling_qualities_and_console_speak_of_the_final_model(notch_report):
     ident, _, rep, page = notch_report
     (tf,) = [t for t in rep["transfer_functions"] if t["name"] == "p_da"]
@@ -166,6 +170,7 @@ def _hover_roots():
             "roll subsidence": next(z.real for z in cubic if abs(z.imag) < 1e-9)}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case, truth, tol", [("xv15_cruise_lateral", SEED_CRUISE, 0.35),
                                               ("xv15_hover_lateral", None, 0.15)])
 def test_shipped_cases_name_their_modes_at_the_seed_eigenvalues(case, truth, tol, tmp_path):

@@ -112,6 +112,7 @@ CASES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(CASES))
 def test_undeclared_effect_is_found_identified_and_halves_the_cost(name):
     effects, edit, (kind, where), truth = CASES[name]
@@ -138,6 +139,7 @@ def test_undeclared_effect_is_found_identified_and_halves_the_cost(name):
     assert all((x["kind"], x["where"]) != (kind, where) for x in loop.limits)
 
 
+@pytest.mark.slow
 def test_an_input_logged_late_is_found_as_its_sensor_skew():
     """The rudder command logged 80 ms late: the outputs lead it by 80 - 33 ms (the true rudder
     delay), the free delay tau_r sits at its bound 0, and the loop adds a skew of the dr
@@ -154,6 +156,7 @@ def test_an_input_logged_late_is_found_as_its_sensor_skew():
     assert loop.fit.cost_average <= 0.5 * first.cost_before
 
 
+@pytest.mark.slow
 def test_two_effects_at_once_are_both_found():
     loop = _loop([make_effect("sensor_skew", output="p", delay_s=0.06),
                   make_effect("actuator_lag", input="dr", time_constant_s=0.125)])
@@ -168,6 +171,7 @@ def test_two_effects_at_once_are_both_found():
     assert loop.fit.cost_average <= 0.5 * loop.steps[0].cost_before
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [50, 51, 52])
 def test_clean_data_adds_nothing(seed):
     """No effect injected: the loop must not add one (no false positive over several noise seeds)."""
@@ -256,6 +260,7 @@ def test_missing_derivative_fills_the_absent_entry():
     np.testing.assert_allclose(_response(aug), ref, rtol=1e-9)
 
 
+@pytest.mark.slow
 def test_diagnosis_ranks_the_model_own_sensitivity_for_a_fixed_derivative():
     """A derivative wrongly fixed (Nr held at half its value) is explained by freeing it."""
     frs, _ = _data([], seed=11)
@@ -294,6 +299,7 @@ def test_a_candidate_that_diverges_in_verification_counts_as_worse():
 
 # --- acceptance as CIFER practice does it ------------------------------------------------------
 
+@pytest.mark.slow
 def test_a_sharp_mode_with_a_poorly_determined_damping_is_added_with_the_damping_fixed():
     """The structural mode the loop used to reject (dipole at 12 rad/s on p: pole damping 0.05,
     zero damping 0.15, +9.5 dB): its pole damping comes out at CR ~20.4 % > 20 %. The shape is
@@ -326,6 +332,7 @@ def test_a_sharp_mode_with_a_poorly_determined_damping_is_added_with_the_damping
     assert f"zeta_mode_p = {fixed['value']:.4g} (fixed: poorly determined)" in effect_text(first.effect)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [31, 32, 33])
 def test_a_notch_on_clean_hover_is_not_made_acceptable_by_fixing(seed):
     """Clean hover data where a notch on da picks up some evidence (1.5-3 times its threshold) with
@@ -362,6 +369,7 @@ def _hover(effects, seed, edit=None, noise=1.0):
     return frs, table, fit_state_space(model, pairs)
 
 
+@pytest.mark.slow
 def test_a_pilot_s_attitude_feedback_is_not_taken_for_a_moment_due_to_attitude():
     """Hover in turbulence, nothing injected (seed 805). Without references the pilot's feedback of
     phi through da biases the estimate in the shape of a roll moment due to bank angle: offered
@@ -382,6 +390,7 @@ def test_a_pilot_s_attitude_feedback_is_not_taken_for_a_moment_due_to_attitude()
     assert loop.added == (), loop.conclusion
 
 
+@pytest.mark.slow
 def test_an_effect_that_bends_the_derivatives_beyond_the_cost_guideline_is_still_found():
     """Hover, a 5 rad/s second-order actuator on da (zeta 0.6): the derivatives bend so far to make
     up for it that the fit fails the method's J_ave <= 100 guideline (about 320), the linear screen
@@ -404,6 +413,7 @@ def test_an_effect_that_bends_the_derivatives_beyond_the_cost_guideline_is_still
     assert loop.fit.cost_average <= 0.5 * loop.steps[0].cost_before
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed, delay_s", [(34, 0.1), (22, 0.05)])
 def test_a_delay_in_hover_is_added_as_a_delay_and_nothing_patches_it(seed, delay_s):
     """Hover, a pure delay on da: the one-parameter delay is what is added (not the two-parameter
@@ -540,6 +550,7 @@ def test_a_richer_rival_is_named_when_its_extra_parameters_are_not_significant()
     assert _rivals(lag, [lag, notch], judge, n_model) == []
 
 
+@pytest.mark.slow
 def test_a_sharp_mode_and_an_actuator_lag_together_are_found_as_a_pair():
     """The issue's second miss: the p mode (zeta 0.05, +9.5 dB at 12 rad/s) with a 0.1 s lag on da.
     Alone the mode cannot explain the lag's phase and fails; a second-order actuator alone is a
@@ -635,6 +646,7 @@ def test_verification_worse_needs_the_loops_false_alarm_level():
 
 
 
+@pytest.mark.slow
 def test_a_derivative_held_far_from_its_value_is_screened_along_the_exact_response():
     """Lda held fixed at a quarter of the simulator's value: the fit bends the other derivatives to
     J_ave above 200, and ln|p/da| is far from linear in Lda over that distance (linearised, the
@@ -652,6 +664,7 @@ def test_a_derivative_held_far_from_its_value_is_screened_along_the_exact_respon
     assert top.parameters["value"] == pytest.approx(truth, rel=0.25)
 
 
+@pytest.mark.slow
 def test_a_pair_the_model_has_no_path_for_is_skipped_with_its_reason_and_the_loop_runs():
     """The rudder column removed from the cruise model (Ydr, Ldr, Ndr): every output's response to
     dr is zero by the model's structure, though the simulated data are coherent there. Those pairs
@@ -679,6 +692,7 @@ def _drop_nda(t):
     del t["parameters"]["Nda"]
 
 
+@pytest.mark.slow
 def test_a_control_derivative_the_fit_made_up_for_is_found_by_refitting_every_missing_one():
     """Hover, the model without Nda (yaw due to aileron). The fit bends the other derivatives to
     make up for it (J_ave about 70: inside the method's <= 100 guideline, but the whitened residual's
@@ -706,6 +720,7 @@ def test_a_control_derivative_the_fit_made_up_for_is_found_by_refitting_every_mi
     assert loop.fit.cost_average <= 0.5 * first.cost_before
 
 
+@pytest.mark.slow
 def test_a_control_path_effect_the_screen_misplaces_is_found_by_refitting_every_one():
     """Hover, a 7 rad/s second-order actuator on dr (zeta 0.5). The fit bends the yaw derivatives
     to make up for it, and about that fit the screen sees a 0.2 rad/s resonance and a 10 s lag, not
@@ -728,6 +743,7 @@ def test_a_control_path_effect_the_screen_misplaces_is_found_by_refitting_every_
 SKEW_SEED = 62     # one where the bound lands between the guideline and a third (61: 18.6 %, 64: evidence < 2x needed)
 
 
+@pytest.mark.slow
 def test_an_effect_s_only_parameter_three_bounds_from_zero_is_kept_and_said_to_be_poorly_determined():
     """Hover, a 30 ms skew on phi (missed on held-out-8 seed 906 of
     benchmarks/residual_confusion.py): clearly there by its F-test, its only parameter at a
@@ -748,6 +764,7 @@ def test_an_effect_s_only_parameter_three_bounds_from_zero_is_kept_and_said_to_b
     assert "poorly determined" in effect_text(loop.added[0])
 
 
+@pytest.mark.slow
 def test_an_effect_added_first_is_taken_out_when_a_later_one_explains_it():
     """Hover, a second-order actuator on dr (8 rad/s, zeta 0.5) with a 50 ms skew on p. The first
     step adds a delay on dr (simpler than the actuator and not significantly worse alone), the
@@ -772,6 +789,7 @@ def test_an_effect_added_first_is_taken_out_when_a_later_one_explains_it():
     assert loop.fit.cost_average <= 0.5 * loop.steps[0].cost_before
 
 
+@pytest.mark.slow
 def test_an_effect_the_backward_step_cannot_retest_is_kept_and_said():
     """The backward step re-fits the model without each earlier effect; when that model cannot
     be built (here the later effect's record names a parameter the current table lacks) the
@@ -799,6 +817,7 @@ def test_an_effect_the_backward_step_cannot_retest_is_kept_and_said():
     assert "no_such_parameter" in untested[0]["error"]
 
 
+@pytest.mark.slow
 def test_one_place_s_rival_kinds_do_not_take_every_refit_from_the_next_place():
     """Hover with twice the sensor noise, a 0.1 s lag on da and a 50 ms skew on r. Once the lag
     is in, the screen ranks a delay, a second-order actuator and a lag on dr (one feature, one
@@ -822,6 +841,7 @@ def test_one_place_s_rival_kinds_do_not_take_every_refit_from_the_next_place():
     assert loop.fit.cost_average <= 0.5 * loop.steps[0].cost_before
 
 
+@pytest.mark.slow
 def test_a_refit_stopped_by_its_budget_is_continued_not_called_unconverged(monkeypatch):
     """A refit inside the loop (and the coupling search) that runs out of cost evaluations while still descending is
     continued once from where it stopped (held-out-12 seed 1310 of
@@ -848,6 +868,7 @@ def test_a_refit_stopped_by_its_budget_is_continued_not_called_unconverged(monke
     assert got.theta[k] == pytest.approx(free.theta[k], rel=1e-5)
 
 
+@pytest.mark.slow
 def test_an_earlier_effect_is_replaced_by_its_simpler_rival_once_a_later_one_is_in():
     """Hover, a 60 ms delay on da with a 10 rad/s mode on p (pole damping 0.06, zero 0.2). At the
     first step a second-order actuator on da explains far more than the delay: its low-damped

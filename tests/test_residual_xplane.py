@@ -132,6 +132,7 @@ def nominal(record):
     return table, fit, frs, check, run_residual_loop(table, fit, frs, verify=check)
 
 
+@pytest.mark.slow
 def test_nominal_short_period_fit_on_real_data(nominal):
     _, fit, _, _, loop = nominal
     _report("nominal (delay free)", fit, loop)
@@ -146,6 +147,7 @@ def test_nominal_short_period_fit_on_real_data(nominal):
     assert fit.value("tau_de") < 1e-3
 
 
+@pytest.mark.slow
 def test_A_loop_with_free_delay_adds_nothing_and_never_worsens(nominal):
     _, fit, _, _, loop = nominal
     s0 = loop.steps[0]
@@ -166,6 +168,7 @@ def no_delay(record):
     return table, fit, frs, check, run_residual_loop(table, fit, frs, verify=check)
 
 
+@pytest.mark.slow
 def test_B_loop_without_delay_finds_no_delay_on_the_real_record(nominal, no_delay):
     _, fit, _, _, loop = no_delay
     _report("no delay", fit, loop)

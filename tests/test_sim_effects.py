@@ -58,6 +58,7 @@ def assert_ratio(ratio, expected):
     np.testing.assert_allclose(np.angle(ratio / expected, deg=True), 0.0, atol=DEG_TOL)
 
 
+@pytest.mark.slow
 def test_engine_matches_python_control_on_every_pair(nominal):
     """The whole simulator (augmentation, FOH discretisation, delays, sampling) against python-control."""
     m = get_model("xv15-cruise")
@@ -148,6 +149,7 @@ def test_sensor_noise_has_the_configured_standard_deviation(nominal):
         assert abs(np.mean(e)) < 4 * s.noise_std / np.sqrt(e.size)
 
 
+@pytest.mark.slow
 def test_turbulence_output_variance_matches_the_lyapunov_solution():
     m = get_model("xv15-cruise")
     turb = Turbulence(sigmas=(3.0, 0.02), correlation_time_s=4.0)

@@ -140,6 +140,7 @@ def test_the_attitude_loop_holds_the_unstable_airframe_in_turbulence():
         assert np.std(y[-int(2 * r.outputs[name].rate_hz):]) < 3.0, name  # settled, only gusts left
 
 
+@pytest.mark.slow
 def test_mcap_log_reads_back_through_the_channel_map(tmp_path):
     """The telemetry mapping and config/quad_channels.toml agree: every signal decodes to what was simulated."""
     from livesweep.telemetry.signals import read_signals
@@ -188,6 +189,7 @@ def _fit(frs, table=None):
 # every parameter lies within 1.3 bounds (seeds 1-4), so no parameter gets an allowance.
 
 
+@pytest.mark.slow
 def test_the_case_identifies_the_model_back_from_a_simulated_sweep():
     t0 = time.perf_counter()
     frs = _frequency_responses()
@@ -210,6 +212,7 @@ def test_the_case_identifies_the_model_back_from_a_simulated_sweep():
     assert_roots_close(fit.eigenvalues, m.eigenvalues(), rtol=0.15)
 
 
+@pytest.mark.slow
 def test_residual_loop_on_clean_quad_data_adds_nothing():
     """The residual loop on clean quadrotor data (no effect injected, seed 2): nothing added."""
     from livesweep.ident.residual import run_residual_loop
@@ -219,6 +222,7 @@ def test_residual_loop_on_clean_quad_data_adds_nothing():
     assert loop.added == (), loop.conclusion
 
 
+@pytest.mark.slow
 def test_a_coupling_the_model_lacks_is_given_to_the_coherent_pair_it_had_no_path_for():
     """The case without Lpitch (roll due to pitch command): the model's p/pitch_cmd is zero by its
     structure while the data are coherent there, so the pair is skipped and no residual screen

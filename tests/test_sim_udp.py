@@ -7,12 +7,15 @@ import threading
 import time
 
 import numpy as np
+import pytest
 
 from livesweep.telemetry import mavlink_codec as codec  # sets MAVLINK20 before pymavlink loads
 from livesweep.sim.scenario import simulate, sweep_scenario
 from livesweep.telemetry.sim_telemetry import mavlink_timeline
 
 from pymavlink import mavutil  # noqa: E402
+
+pytestmark = pytest.mark.slow                 # every test of this module takes over 1 s
 
 ARGS = ["--omega-min", "1.0", "--omega-max", "10", "--duration", "13", "--repeat", "1", "--amplitude", "3",
         "--off-axis-rms", "0.2", "--seed", "9"]

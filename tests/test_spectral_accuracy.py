@@ -54,6 +54,7 @@ def test_noise_free_composite_matches_the_model_within_02_db_and_1_deg():
     assert checked > 300
 
 
+@pytest.mark.slow
 def test_noisy_composite_is_within_two_random_errors_of_the_truth_at_90_percent_of_points():
     """Every magnitude point and every phase point (a Bode plot's worth each) of the adequate band
     (gamma^2 >= 0.6), pooled over four turbulence/noise realisations: neighbouring points of the

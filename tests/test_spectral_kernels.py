@@ -112,6 +112,7 @@ def test_default_windows_are_whole_samples_within_half_the_record():
     assert default_windows_s(20, 50.0, 100.0, 150.0) == (8 / 50.0, 9 / 50.0, 10 / 50.0)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(fs=st.sampled_from([50.0, 200.0, 400.0, 1000.0]), n=st.integers(2 * MIN_WINDOW_SAMPLES, 600_000),
        margin=st.floats(1.000001, 50.0), span=st.floats(0.01, 1000.0))

@@ -22,7 +22,8 @@ if not DATA.is_dir():
 TLOGS = DATA / "mavlink_tlog"
 
 
-@pytest.mark.parametrize("name", ["uavlogviewer_autotest_flight_logs.tlog", "uavlogviewer_vtol_sitl.tlog"])
+@pytest.mark.parametrize("name", [pytest.param("uavlogviewer_autotest_flight_logs.tlog", marks=pytest.mark.slow),
+                                  "uavlogviewer_vtol_sitl.tlog"])
 def test_the_shared_tlogs_have_no_implausible_stamp(name):
     path = TLOGS / name
     if not path.is_file():

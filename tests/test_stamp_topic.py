@@ -64,6 +64,7 @@ def _against_pidr(t: np.ndarray, v: np.ndarray, pidr: np.ndarray) -> tuple[int, 
 PIDR_TOLERANCE = 0.02
 
 
+@pytest.mark.slow
 def test_the_live_aligner_puts_pid_tuning_on_the_vehicle_clock(streamed):
     frames, pidr = streamed
     pid = load_map("ardupilot-copter-pid")
@@ -80,6 +81,7 @@ def test_the_live_aligner_puts_pid_tuning_on_the_vehicle_clock(streamed):
     assert al.counts["late_dropped"] == 0
 
 
+@pytest.mark.slow
 def test_the_offline_reader_borrows_the_same_stamps(streamed, tmp_path):
     frames, pidr = streamed
     log = tmp_path / "streamed.mcap"

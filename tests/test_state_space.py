@@ -129,6 +129,7 @@ def test_implicit_M_and_nonlinear_entries_against_python_control():
     assert_roots_close(m.eigenvalues(th), np.linalg.eigvals(Mi @ F), rtol=1e-10)
 
 
+@pytest.mark.slow
 def test_exact_jacobian_against_central_differences(cruise):
     _, frs = cruise
     table = _table(CRUISE)
@@ -173,6 +174,7 @@ def _assert_jacobian_column_is_central_difference(m, frs, name):
     np.testing.assert_allclose(D[:, list(m.free).index(k)], num, rtol=1e-5, atol=1e-6 * np.abs(num).max())
 
 
+@pytest.mark.slow
 def test_output_delay_is_a_pure_skew_on_that_outputs_pairs_with_an_exact_jacobian(cruise):
     """A sensor time skew (``output_delays``): exp(-jw tau_p) on every p pair, nothing else."""
     _, frs = cruise
@@ -186,6 +188,7 @@ def test_output_delay_is_a_pure_skew_on_that_outputs_pairs_with_an_exact_jacobia
     _assert_jacobian_column_is_central_difference(m, frs, "tau_p")
 
 
+@pytest.mark.slow
 def test_input_skew_advances_that_inputs_pairs_with_an_exact_jacobian(cruise):
     """An input measured late (``input_skews``): exp(+jw tau_s) on every dr pair, so the net input
     delay tau_r - tau_s may be negative."""
@@ -283,6 +286,7 @@ def cruise_fit(cruise):
     return model, pairs, fit
 
 
+@pytest.mark.slow
 def test_cruise_recovers_tables_2_1_and_2_2(cruise_fit):
     """The fit's speed (under 5 s) is benchmarks/bench_state_space.py's: no timing here."""
     model, pairs, fit = cruise_fit
@@ -300,6 +304,7 @@ def test_cruise_recovers_tables_2_1_and_2_2(cruise_fit):
     assert_roots_close(fit.eigenvalues, xv15_cruise().eigenvalues(), atol=0.08)
 
 
+@pytest.mark.slow
 def test_cruise_structure_reduction_removes_a_true_zero_and_keeps_the_real_ones(cruise_fit):
     model, pairs, fit = cruise_fit
     red = reduce_structure(model, pairs, fit)
@@ -330,6 +335,7 @@ def test_cruise_structure_reduction_removes_a_true_zero_and_keeps_the_real_ones(
     assert {"cramer_rao_pct", "insensitivity_pct", "fixed", "value"} <= set(d["parameters"][0])
 
 
+@pytest.mark.slow
 def test_a_fit_that_does_not_converge_says_so(cruise_fit):
     model, pairs, _ = cruise_fit
     fit = fit_state_space(model, pairs, max_nfev=2)
@@ -338,6 +344,7 @@ def test_a_fit_that_does_not_converge_says_so(cruise_fit):
     assert fit.to_dict()["converged"] is False
 
 
+@pytest.mark.slow
 def test_lm_and_multistart_agree(cruise_fit):
     model, pairs, fit = cruise_fit
     lm = fit_state_space(model, pairs, method="lm")
@@ -349,6 +356,7 @@ def test_lm_and_multistart_agree(cruise_fit):
         fit_state_space(model, pairs, method="bfgs")
 
 
+@pytest.mark.slow
 def test_equation_error_start_when_the_case_gives_no_values(cruise, cruise_fit):
     _, frs = cruise
     _, _, fit = cruise_fit
@@ -375,6 +383,7 @@ def hover_fit(hover):
     return model, pairs, skipped, prior, fit_state_space(model, pairs, skipped_pairs=skipped)
 
 
+@pytest.mark.slow
 def test_hover_sample_logs_recover_tables_2_3_and_2_4(hover, hover_fit):
     """Shipped hover logs: flown with a stabilising pilot loop, so the case forms the responses
     through the logged sweep injections (method.md §4.6). The rudder pairs other than r/dr (and
@@ -401,6 +410,7 @@ def test_hover_sample_logs_recover_tables_2_3_and_2_4(hover, hover_fit):
     assert_roots_close(fit.eigenvalues, xv15_hover().eigenvalues(), atol=0.08)
 
 
+@pytest.mark.slow
 def test_hover_structure_reduction_removes_the_true_zeros_and_keeps_the_real_ones(hover_fit):
     model, pairs, _, prior, fit = hover_fit
     red = reduce_structure(model, pairs, fit)
@@ -415,6 +425,7 @@ def test_hover_structure_reduction_removes_the_true_zeros_and_keeps_the_real_one
     _within_cr(red, HOVER_TRUTH, 3.0)
 
 
+@pytest.mark.slow
 def test_hover_direct_miso_estimate_is_closed_loop_biased(hover, hover_stage):
     """Why the case uses references: on the same logs, the direct MISO responses make the true
     model misfit the low-frequency data, while the referenced responses fit it everywhere."""
@@ -448,6 +459,7 @@ def _simulated_frs(model_name, amplitudes, band, windows, seed, turbulence=True)
     return analyze(values, names, 50.0, ["da", "dr"], list(res.outputs), band, windows_s=windows).best
 
 
+@pytest.mark.slow
 def test_hover_open_loop_equivalent_data_recover_tables_2_3_and_2_4(hover):
     """Same test point without turbulence: the pilot loop then sees no disturbance, the responses
     are the open-loop ones, and the fit recovers the hover truth; the reduction removes exactly
@@ -501,6 +513,7 @@ def test_accuracy_formulas_on_a_linear_problem():
     assert acc2.cramer_rao[3] == pytest.approx(np.sqrt(np.linalg.inv(K)[1, 1]), rel=1e-8)
 
 
+@pytest.mark.slow
 def test_cramer_rao_monte_carlo(cruise):
     """Calibrate the raw CR normalisation: independent noisy realisations of the cruise test point
     (turbulence, sensor noise, off-axis pilot noise; new seeds), identified with the cruise model
@@ -536,6 +549,7 @@ def test_cramer_rao_monte_carlo(cruise):
     assert np.median(rms) < 1.6
 
 
+@pytest.mark.slow
 def test_hover_residual_loop_adds_nothing_outside_the_true_structure(hover, hover_fit):
     """The shipped hover logs hold no undeclared effect: after the reduction, the residual loop
     adds nothing but, at most, a derivative of Tables 2.3-2.4 the reduction took out (Np), with the

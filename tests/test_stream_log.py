@@ -147,6 +147,7 @@ def _mcap_mavlink(path: Path) -> list[tuple[str, dict]]:
     return out
 
 
+@pytest.mark.slow
 def test_tlog_streamed_into_the_monitor_records_what_the_tlog_holds(tmp_path):
     need(VTOL)
     from livesweep.telemetry import mavlink_codec  # noqa: F401  (MAVLINK20=1 before pymavlink)
@@ -233,6 +234,7 @@ def test_tlog_streamed_into_the_monitor_records_what_the_tlog_holds(tmp_path):
             assert np.float32(d[f]) == np.float32(getattr(m, f)), f
 
 
+@pytest.mark.slow
 def test_tlog_frames_arrive_byte_for_byte():
     need(VTOL)
     data = VTOL.read_bytes()
@@ -279,6 +281,7 @@ def _mode_at(modes: list[dict], t_us: int) -> int:
     return mode
 
 
+@pytest.mark.slow
 def test_dataflash_paced_stream_is_what_arducopter_sends(sid7):
     # 33..93 s after the log's start: LOITER, SystemID axis 7 (mode 25) from 35.2 s, LOITER again
     # at 92.2 s; 50 Hz per message as SRx_EXTRA1 = 50 would send it
@@ -336,6 +339,7 @@ def test_dataflash_paced_stream_is_what_arducopter_sends(sid7):
     assert abs(span_rx - span_log) <= 0.05 * span_log + 0.1, (span_rx, span_log)
 
 
+@pytest.mark.slow
 def test_dataflash_full_rate_pid_tuning_and_imu_equal_the_log(sid7):
     # 2 s of the chirp as fast as possible, at the log's own 400 Hz
     frames, counts, out = _stream_into_source(str(SID7), "--speed", "0", "--start-s", "40", "--end-s", "42")
@@ -429,6 +433,7 @@ def test_rate_cap_on_a_tlog_and_an_empty_slice_are_one_line(capsys):
     assert str(SID7) in line and "nothing to send from 10000 s" in line
 
 
+@pytest.mark.slow
 def test_dataflash_parameters_go_out_as_a_fetch_then_as_each_change(sid7):
     """PARAM_VALUE: at the slice start every parameter with its value then (what a ground station
     fetches as it connects), then each one set during the slice when the log records it (the

@@ -75,6 +75,7 @@ def sweep_times(res):
     return seg, start, start + p["duration_s"]
 
 
+@pytest.mark.slow
 def test_a_sweep_found_by_its_oscillation_is_go_and_a_third_of_it_no_go_naming_what_is_missing():
     res, frames = sim_frames(seed=21)
     seg, t0, t1 = sweep_times(res)
@@ -103,6 +104,7 @@ def test_a_sweep_found_by_its_oscillation_is_go_and_a_third_of_it_no_go_naming_w
     assert "it oscillated over" in gap
 
 
+@pytest.mark.slow
 def test_telemetry_lost_after_the_sweep_ended_keeps_its_verdict_and_lost_during_it_is_no_go():
     """The link drops 3 s into the trim after the sweep (before the 5 quiet seconds that end a
     detected sweep): the sweep was over, so it is judged on what it holds (GO, ending where the
@@ -126,6 +128,7 @@ def test_telemetry_lost_after_the_sweep_ended_keeps_its_verdict_and_lost_during_
     assert tp["verdict"] == "NO-GO" and any("telemetry lost" in m for m in tp["missing"]), tp
 
 
+@pytest.mark.slow
 def test_no_test_point_and_no_go_from_doublets_or_a_spool_up_ramp():
     """What a sliding window called GO on a real stream: a trim ramp (a motor spooling up) and
     short pilot inputs. Neither opens a test point; the verdict stays WAIT."""
@@ -172,6 +175,7 @@ def test_markers_open_and_close_test_points_on_the_data_clock():
         assert all(e.t_s == 12.5 for e in evs)
 
 
+@pytest.mark.slow
 def test_a_second_vehicle_on_the_link_changes_no_test_point():
     """Vehicle 2 flies its own sweep (another seed, another time) and says "SystemID Finished" in the
     middle of vehicle 1's sweep: the test points are vehicle 1's, as without vehicle 2."""
@@ -214,6 +218,7 @@ def dataflash_settings():
                            band_rad_s=(3.0, 60.0), sample_rate_hz=200.0, window_s=60.0, test_points=tp)
 
 
+@pytest.mark.slow
 def test_arducopter_systemid_opens_and_closes_the_test_point_and_judges_it(sid7):
     """ArduCopter 4.4 SITL, SystemID axis 7 (rate roll), chirp 0.5-12 Hz: the test point runs from
     "SystemID Starting: axis=7" to "SystemID Finished" (MSG), sweeps roll, and is GO; the same log cut
@@ -252,6 +257,7 @@ def test_arducopter_systemid_opens_and_closes_the_test_point_and_judges_it(sid7)
     assert f_cut_rad_s - bins <= lo <= f_cut_rad_s + 3 * bins, (gap, f_cut_rad_s)
 
 
+@pytest.mark.slow
 def test_telemetry_lost_after_the_autopilots_chirp_ended_is_judged_on_what_it_holds(sid7):
     """The link drops right after ArduPilot's chirp has faded out, before "SystemID Finished": the
     test point ends where the chirp ended (ArduPilot's own SIDD log: its last sample of the chirp)
@@ -283,6 +289,7 @@ def test_telemetry_lost_after_the_autopilots_chirp_ended_is_judged_on_what_it_ho
     assert tp["verdict"] == "NO-GO" and any("telemetry lost" in m for m in tp["missing"]), tp
 
 
+@pytest.mark.slow
 def test_terminal_markers_reach_the_recording_and_open_a_test_point(tmp_path):
     """The monitor command with --markers: lines typed on its standard input open and close a test
     point over a simulated sweep streamed over UDP, and are in the recording for a replay."""

@@ -61,6 +61,7 @@ def test_the_limit_itself_is_accepted():
     assert parse_structure(str(MAX_TF_ORDER)).order == MAX_TF_ORDER
 
 
+@pytest.mark.slow
 def test_cli_refuses_the_case_in_one_line(tmp_path):
     path = _case(tmp_path, f'"{FIRST_500}"')
     run = subprocess.run([sys.executable, "-m", "livesweep", "identify", str(path), "--out", str(tmp_path / "out")],

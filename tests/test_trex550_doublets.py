@@ -19,6 +19,8 @@ from scipy import signal
 from livesweep.convert import convert
 from livesweep.telemetry.mcap_log import read_topics_fields
 
+pytestmark = pytest.mark.slow      # every test shares the module's identification run, over 1 s
+
 ROOT = Path(__file__).resolve().parents[1]
 _REL = Path("shared") / "data" / "trex550_heli" / "Data_graphready.mat"
 DATA = next((p for p in (ROOT.parent / _REL, Path("/work") / _REL) if p.is_file()), None)

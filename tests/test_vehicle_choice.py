@@ -97,6 +97,7 @@ def _run(tmp_path, scenario: str, stream1) -> tuple[list[dict], str, Counter]:
     return estimates, "\n".join(alerts), mavlink_counts(out)
 
 
+@pytest.mark.slow
 def test_other_vehicles_and_unsigned_strangers_change_no_estimate(tmp_path):
     stream1 = sim_stream(5, 30.0)
     alone, _, _ = _run(tmp_path, "alone", stream1)
