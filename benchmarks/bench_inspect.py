@@ -154,7 +154,7 @@ def main() -> None:
     if DATA is None:
         print("skipped: ../shared/data is absent")
         return
-    from livesweep.inspect import format_inspection, inspect_log
+    from livesweep.inspection import format_inspection, inspect_log
 
     logs = sorted(p for p in DATA.rglob("*") if p.is_file() and p.suffix.lower() != ".md" and p.name != "LICENSE")
     tmp = tempfile.TemporaryDirectory()

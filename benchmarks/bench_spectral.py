@@ -50,7 +50,7 @@ from numpy.lib.stride_tricks import sliding_window_view  # noqa: E402
 from scipy import signal as sps  # noqa: E402
 
 from livesweep.config import load_case  # noqa: E402
-from livesweep.pipeline.frequency_response import load_record, run_frequency_response_stage  # noqa: E402
+from livesweep.stages.frequency_response import load_record, run_frequency_response_stage  # noqa: E402
 from livesweep.spectral.analysis import analyze  # noqa: E402
 
 CASE = Path(__file__).resolve().parents[1] / "config" / "xv15_cruise_lateral.toml"

@@ -38,7 +38,7 @@ from scipy.signal import lfilter  # noqa: E402
 from livesweep.config import load_case  # noqa: E402
 from livesweep.ident.state_space import StateSpaceModel, fit_state_space, select_pairs  # noqa: E402
 from livesweep.ident.verify import simulate_response  # noqa: E402
-from livesweep.pipeline.frequency_response import load_record, run_frequency_response_stage  # noqa: E402
+from livesweep.stages.frequency_response import load_record, run_frequency_response_stage  # noqa: E402
 from livesweep.sim.models import xv15_cruise  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

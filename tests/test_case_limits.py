@@ -201,7 +201,7 @@ def test_window_spectra_values_counts_what_the_spectral_stage_allocates():
 def test_transfer_function_table_numbers_and_flags_are_checked(tmp_path, raw, words):
     from types import SimpleNamespace
 
-    from livesweep.pipeline.parametric import _tf_table
+    from livesweep.stages.parametric import _tf_table
 
     table = {"output": "p", "input": "da", "denominator": "(1/T)", **raw}
     with pytest.raises(ConfigError) as e:
@@ -212,7 +212,7 @@ def test_transfer_function_table_numbers_and_flags_are_checked(tmp_path, raw, wo
 
 def test_resampled_record_size_is_checked_before_resampling(tmp_path):
     """Ten samples 1e5 s apart resampled at 1 kHz would be 9e8 samples x 2 signals (14 GB)."""
-    from livesweep.pipeline.frequency_response import run_frequency_response_stage
+    from livesweep.stages.frequency_response import run_frequency_response_stage
     from livesweep.telemetry.mcap_log import McapLogWriter
 
     with McapLogWriter(tmp_path / "a.mcap") as w:
@@ -236,7 +236,7 @@ def test_resampled_record_size_is_checked_before_resampling(tmp_path):
 def test_residual_false_alarm_must_be_a_small_probability(tmp_path, value):
     from types import SimpleNamespace
 
-    from livesweep.pipeline.residual import residual_settings
+    from livesweep.stages.residual import residual_settings
 
     case = SimpleNamespace(path=tmp_path / "case.toml", tables={"residual": {"false_alarm": value}})
     with pytest.raises(ConfigError, match=r"\[residual\]\.false_alarm = .*probability in \(0, 0.2\]"):
@@ -246,7 +246,7 @@ def test_residual_false_alarm_must_be_a_small_probability(tmp_path, value):
 def test_residual_min_evidence_is_refused_with_what_replaced_it(tmp_path):
     from types import SimpleNamespace
 
-    from livesweep.pipeline.residual import residual_settings
+    from livesweep.stages.residual import residual_settings
 
     case = SimpleNamespace(path=tmp_path / "case.toml", tables={"residual": {"min_evidence": {"time_delay": 50}}})
     with pytest.raises(ConfigError, match=r"min_evidence: no longer used.*set false_alarm"):

@@ -2,8 +2,8 @@
 
 * ``docs/case-file.md``: every ``Keys:`` line (one per table section) lists exactly the keys the
   parser of that table accepts (the constants in ``livesweep.config``,
-  ``livesweep.pipeline.parametric``, ``livesweep.ident.state_space``,
-  ``livesweep.pipeline.residual`` and ``livesweep.convert.table``).
+  ``livesweep.stages.parametric``, ``livesweep.ident.state_space``,
+  ``livesweep.stages.residual`` and ``livesweep.convert.table``).
 * ``docs/outputs.md``: every ``/livesweep/<name>`` channel (and documented nested object) lists
   exactly the properties of its JSON Schema (``RESULT_SCHEMAS``); the ``report.json`` sections list
   every key a real report holds (the shipped XV-15 cruise case, identified here); the files of
@@ -80,8 +80,8 @@ def _case_file_tables() -> dict[str, set]:
     from livesweep import config
     from livesweep.convert import table
     from livesweep.ident.state_space import _TABLE_KEYS
-    from livesweep.pipeline import residual
-    from livesweep.pipeline.parametric import _TF_KEYS
+    from livesweep.stages import residual
+    from livesweep.stages.parametric import _TF_KEYS
 
     return {
         "Top-level tables of a case file": set(config.CASE_KEYS),
@@ -125,7 +125,7 @@ def test_residual_min_evidence_is_refused_and_parameters_take_value_and_fixed():
     """The two key sets of test_case_file_keys_match_the_parsers that are not plain constants."""
     from livesweep.errors import ConfigError
     from livesweep.ident.state_space import StateSpaceModel
-    from livesweep.pipeline.residual import residual_settings
+    from livesweep.stages.residual import residual_settings
 
     case = types.SimpleNamespace(path=Path("case.toml"), tables={"residual": {"min_evidence": 10.0}})
     with pytest.raises(ConfigError, match="min_evidence"):

@@ -4,7 +4,7 @@ an attitude output as it is), with the control sense read from the response, not
 import numpy as np
 import pytest
 
-from livesweep.pipeline.parametric import handling_qualities
+from livesweep.stages.parametric import handling_qualities
 
 W = np.geomspace(0.3, 40.0, 300)
 S = 1j * W

@@ -30,7 +30,7 @@ from scipy import signal as sps
 
 from livesweep.config import load_case
 from livesweep.convert import convert
-from livesweep.pipeline.frequency_response import run_frequency_response_stage
+from livesweep.stages.frequency_response import run_frequency_response_stage
 from livesweep.telemetry.mcap_log import read_topics_fields
 
 pytestmark = pytest.mark.slow      # every test shares the module's SITL log fixture, over 1 s

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from livesweep.config import load_case
-from livesweep.pipeline.frequency_response import run_frequency_response_stage
+from livesweep.stages.frequency_response import run_frequency_response_stage
 from livesweep.sim.effects import make_effect
 from livesweep.sim.models import xv15_cruise
 from livesweep.sim.scenario import simulate, sweep_scenario
@@ -241,7 +241,7 @@ def test_doublets_are_called_pulse_like_and_sweeps_are_not():
     import dataclasses
 
     from livesweep.config import load_case
-    from livesweep.pipeline.frequency_response import run_frequency_response_stage
+    from livesweep.stages.frequency_response import run_frequency_response_stage
 
     case = load_case(Path(__file__).resolve().parents[1] / "config" / "xv15_cruise_lateral.toml")
     sweeps = run_frequency_response_stage(case).data_quality

@@ -79,8 +79,8 @@ def test_hover_state_space_stage_fixes_the_unmeasurable_and_removes_the_true_zer
     small yaw derivatives at the guideline's edge (Nv, Np: test_state_space); the derivatives
     kept lie within 3 CR bounds of the tables."""
     from livesweep.config import load_case
-    from livesweep.pipeline.frequency_response import run_frequency_response_stage
-    from livesweep.pipeline.parametric import run_state_space_stage
+    from livesweep.stages.frequency_response import run_frequency_response_stage
+    from livesweep.stages.parametric import run_state_space_stage
     from livesweep.sim.models import xv15_hover
 
     case = load_case(ROOT / "config" / "xv15_hover_lateral.toml")
@@ -101,7 +101,7 @@ def test_handling_qualities_of_measured_and_fitted_p_da_agree_with_the_true_mode
     """Bandwidth of the roll-attitude response (p/da integrated; method.md §10) from the measured and
     the fitted response, against the same quantity of the exact model (the functions themselves are
     checked against analytic systems in test_handling.py)."""
-    from livesweep.pipeline.parametric import handling_qualities
+    from livesweep.stages.parametric import handling_qualities
 
     _, rep, _ = full_report
     hq = next(t for t in rep["transfer_functions"] if t["name"] == "p_da")["handling_qualities"]

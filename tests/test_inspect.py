@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from livesweep import cli
-from livesweep.inspect import format_inspection, inspect_log
+from livesweep.inspection import format_inspection, inspect_log
 
 ROOT = Path(__file__).resolve().parents[1]
 _DATA = ROOT.parent / "shared" / "data"

@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from livesweep import cli
-from livesweep.inspect import format_inspection, inspect_log, stderr_progress
+from livesweep.inspection import format_inspection, inspect_log, stderr_progress
 
 ROOT = Path(__file__).resolve().parents[1]
 _DATA = ROOT.parent / "shared" / "data"

@@ -15,7 +15,7 @@ import pytest
 from scipy import signal
 
 from livesweep.spectral.injection import SweepInjection, ardupilot_chirp
-from livesweep.spectral.test_point import coherence_sigma, judge_test_point
+from livesweep.spectral.verdict import coherence_sigma, judge_test_point
 
 FS = 50.0
 BAND = (1.0, 40.0)

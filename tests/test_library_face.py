@@ -127,7 +127,7 @@ def test_a_stage_run_in_a_forked_child_returns_its_value_or_raises_its_error():
     import os
     import threading
 
-    from livesweep.pipeline.background import Background as _Background
+    from livesweep.stages.background import Background as _Background
 
     forks = sys.platform.startswith("linux") and (os.cpu_count() or 1) >= 2 and threading.active_count() == 1
     pid = _Background(os.getpid).result()
@@ -315,7 +315,7 @@ def test_example_replay_judges_the_aileron_sweep_go():
 
 def test_stage_tables_are_parsed_once_and_fail_before_any_data_is_read(tmp_path):
     from livesweep.ident.state_space import StateSpaceModel
-    from livesweep.pipeline.identify import parse_case_specs
+    from livesweep.stages.identify import parse_case_specs
     from livesweep.config import load_case
 
     case_path = ROOT / "config" / "xv15_cruise_lateral.toml"

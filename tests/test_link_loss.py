@@ -28,7 +28,7 @@ from livesweep.monitor.pipeline import MonitorPipeline, MonitorSettings
 from livesweep.monitor.status_line import format_status
 from livesweep.monitor.text import markdown_test_points
 from livesweep.sim.scenario import simulate, sweep_scenario
-from livesweep.spectral.test_point import frames_missing
+from livesweep.spectral.verdict import frames_missing
 from livesweep.telemetry.mavlink_in import MavlinkSource
 from livesweep.telemetry.mavlink_out import MavlinkSender, stream_records
 from livesweep.telemetry.replay import McapReplaySource

@@ -70,7 +70,7 @@ def _monitor(out: Path, preset: str) -> tuple[subprocess.Popen, int]:
 
 
 def _stream(log: Path, port: int, start_s: float, end_s: float, speed: float, *extra: str) -> subprocess.Popen:
-    from livesweep.inspect import STREAM_RATE_HZ
+    from livesweep.inspection import STREAM_RATE_HZ
 
     return _livesweep("stream", str(log), "--mavlink", f"udpout:127.0.0.1:{port}", "--start-s", f"{start_s:.6f}",
                       "--end-s", f"{end_s:.6f}", "--rate-hz", f"{STREAM_RATE_HZ:g}", "--speed", f"{speed:g}", *extra)
@@ -115,7 +115,7 @@ def _finished(ref: dict, start_s: float) -> float:
 
 
 def _presets() -> list[str]:
-    from livesweep.inspect import inspect_log
+    from livesweep.inspection import inspect_log
 
     return list(inspect_log(SID7).live_maps)
 

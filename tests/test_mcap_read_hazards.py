@@ -346,7 +346,7 @@ def test_columns_decoded_in_batches_equal_mcaps_reader_and_name_the_right_messag
 
 def test_a_truncated_verification_log_is_noted_too(tmp_path):
     from livesweep.config import load_case
-    from livesweep.pipeline.parametric import VerificationRunner
+    from livesweep.stages.parametric import VerificationRunner
 
     full = _sweep_log(tmp_path / "full.mcap")
     (tmp_path / "cut.mcap").write_bytes(full.read_bytes()[: int(full.stat().st_size * 0.7)])

@@ -62,7 +62,7 @@ def test_percent_never_crosses_its_threshold(fraction, threshold):
 @given(st.floats(0.0, 1.0), st.floats(0.01, 0.99))
 def test_points_say_the_side_of_the_threshold_and_the_distance(fraction, threshold):
     """The distance in percentage points has the sign of the side it is on, never "+0" or "-0"."""
-    from livesweep.numbers import points
+    from livesweep.numeric import points
 
     text = points(fraction, threshold)
     d = float(text.split()[0])

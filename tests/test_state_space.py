@@ -19,7 +19,7 @@ from livesweep.errors import ConfigError
 from livesweep.ident.accuracy import MONTE_CARLO_SCATTER_OVER_CR, accuracy_from_jacobian
 from livesweep.ident.state_space import (StateSpaceModel, _Problem, a_priori_eliminations, equation_error_start,
                                          fit_state_space, reduce_structure, select_pairs)
-from livesweep.pipeline.frequency_response import run_frequency_response_stage
+from livesweep.stages.frequency_response import run_frequency_response_stage
 from livesweep.sim.models import xv15_cruise, xv15_hover
 from livesweep.sim.scenario import simulate, sweep_scenario
 from livesweep.spectral.analysis import analyze

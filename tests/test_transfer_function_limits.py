@@ -14,7 +14,7 @@ from livesweep.config import load_case
 from livesweep.errors import ConfigError
 from livesweep.ident.transfer_function import parse_structure
 from livesweep.limits import MAX_TF_ORDER
-from livesweep.pipeline.identify import parse_case_specs
+from livesweep.stages.identify import parse_case_specs
 from livesweep.report.html import _transfer_functions
 from livesweep.report.summary import stage_summary
 from test_case_limits import CASE as BASE_CASE

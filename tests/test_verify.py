@@ -16,7 +16,7 @@ from scipy import signal
 from livesweep.config import load_case
 from livesweep.errors import ConfigError
 from livesweep.ident.verify import J_RMS_MAX, TIC_MAX, Verification, simulate_response, verify
-from livesweep.pipeline.frequency_response import load_record
+from livesweep.stages.frequency_response import load_record
 from livesweep.sim.models import xv15_cruise
 from livesweep.telemetry.mcap_log import read_metadata
 

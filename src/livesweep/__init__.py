@@ -18,9 +18,9 @@ The library face (each name loads its module on first use, so ``import livesweep
 __version__ = "0.1.0"
 
 _LAZY = {
-    "identify": ("livesweep.pipeline.identify", "identify"),
-    "Identification": ("livesweep.pipeline.identify", "Identification"),
-    "STAGES": ("livesweep.pipeline", "STAGES"),
+    "identify": ("livesweep.stages.identify", "identify"),
+    "Identification": ("livesweep.stages.identify", "Identification"),
+    "STAGES": ("livesweep.stages", "STAGES"),
     "write_report": ("livesweep.report.writer", "write_report"),
     "replay": ("livesweep.monitor.session", "replay"),
     "ReplayResult": ("livesweep.monitor.session", "ReplayResult"),

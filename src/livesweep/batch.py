@@ -32,8 +32,8 @@ from livesweep import __version__
 from livesweep.convert.common import sha256_of
 from livesweep.errors import ConfigError
 from livesweep.locks import folder_lock
-from livesweep.numbers import finite_or_none as _finite_or_none
-from livesweep.pipeline import STAGES
+from livesweep.numeric import finite_or_none as _finite_or_none
+from livesweep.stages import STAGES
 
 __all__ = ["find_cases", "fingerprint", "run_one", "run_batch", "summarize", "format_table",
            "add_batch_arguments", "cmd_batch", "BATCH_FILE", "LOG_FILE", "SUMMARY_JSON", "SUMMARY_TXT"]
@@ -205,7 +205,7 @@ def fingerprint(case_path, stage: str = _DEFAULT_STAGE) -> str:
 
 
 def summarize(ident) -> dict:
-    """The summary numbers of one :class:`~livesweep.pipeline.identify.Identification`.
+    """The summary numbers of one :class:`~livesweep.stages.identify.Identification`.
 
     Returns
     -------
@@ -299,7 +299,7 @@ def run_one(case_path, out_dir, stage: str = _DEFAULT_STAGE, folder: str | None 
     out_dir : str or Path
         The batch folder; the case's report goes to ``out_dir/<folder>``.
     stage : str
-        Last stage to run (``livesweep.pipeline.STAGES``).
+        Last stage to run (``livesweep.stages.STAGES``).
     folder : str, optional
         The case's folder name (:func:`run_batch` assigns unique ones); default the case name made
         file-system safe.
@@ -340,7 +340,7 @@ def run_one(case_path, out_dir, stage: str = _DEFAULT_STAGE, folder: str | None 
     try:
         with open(case_dir / LOG_FILE, "w", buffering=1) as log:
             try:
-                from livesweep.pipeline.identify import identify
+                from livesweep.stages.identify import identify
                 from livesweep.report.console import summary_lines
                 from livesweep.report.writer import write_report
 
@@ -498,7 +498,7 @@ def run_batch(cases, out_dir, *, stage: str = _DEFAULT_STAGE, workers: int | Non
     out_dir : str or Path
         The batch folder (created). Holds one folder per case, ``summary.json`` and ``summary.txt``.
     stage : str
-        Last stage to run for every case (``livesweep.pipeline.STAGES``).
+        Last stage to run for every case (``livesweep.stages.STAGES``).
     workers : int, optional
         Local worker processes (default: the number of CPUs). Ignored with ``dask_address``.
     dask_address : str, optional

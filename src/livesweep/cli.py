@@ -15,7 +15,7 @@ from pathlib import Path
 
 from livesweep import __version__
 from livesweep.errors import ConfigError, LivesweepError
-from livesweep.pipeline import STAGES  # the stage names only: the stages load when a command runs
+from livesweep.stages import STAGES  # the stage names only: the stages load when a command runs
 from livesweep.spectral import DEFAULT_WINDOW_S
 
 EXIT_USAGE = 2
@@ -259,7 +259,7 @@ def _command(name: str) -> str:
 
 def cmd_inspect(args) -> int:
     """``livesweep inspect LOG``: topics, fields, rates, span, test points, fitting channel maps."""
-    from livesweep.inspect import format_inspection, inspect_log, stderr_progress
+    from livesweep.inspection import format_inspection, inspect_log, stderr_progress
 
     print(format_inspection(inspect_log(args.log, columns=args.columns, progress=stderr_progress(args.log))))
     return 0
@@ -353,7 +353,7 @@ def _identify(args, case) -> int:
     its report and print its summary."""
     import time
 
-    from livesweep.pipeline.identify import identify
+    from livesweep.stages.identify import identify
     from livesweep.report.writer import write_report
 
     t0 = time.monotonic()

@@ -289,7 +289,7 @@ class Case:
     tables : dict
         The raw TOML tables of later stages (any of ``transfer_functions``, ``state_space``,
         ``residual`` that are present), unparsed here; ``identify`` parses them once into typed
-        specs (:func:`livesweep.pipeline.identify.parse_case_specs`).
+        specs (:func:`livesweep.stages.identify.parse_case_specs`).
     """
 
     path: Path

@@ -42,7 +42,7 @@ way a file cut while being written ends).
 Counted
 -------
 ``skipped["nonfinite_cells"]``: NaN/inf or empty cells in mapped columns, written as ``"NaN"`` /
-``"Infinity"`` / ``"-Infinity"`` (the recording's convention, :mod:`livesweep.numbers`);
+``"Infinity"`` / ``"-Infinity"`` (the recording's convention, :mod:`livesweep.numeric`);
 ``skipped["rows_nonfinite_time"]``: rows whose time is not finite (not written);
 time running backwards: counted in a warning, rows kept in file order.
 """
@@ -61,7 +61,7 @@ import numpy as np
 
 from livesweep.convert.common import ConversionResult, ConversionWriter, refuse_options, sniff_format
 from livesweep.errors import ConfigError, LogFormatError
-from livesweep.numbers import float_json_schema
+from livesweep.numeric import float_json_schema
 
 __all__ = ["convert_table", "load_column_map", "ColumnMap", "ColumnSpec", "read_table"]
 

@@ -60,7 +60,7 @@ import numpy as np
 from livesweep.convert.common import (MAX_BOOT_US, MIN_RECORD_FRACTION, UNIX_RANGE_S, ConversionResult,
                                       ConversionWriter, refuse_options)
 from livesweep.errors import ConfigError, LogFormatError
-from livesweep.numbers import float_json_schema
+from livesweep.numeric import float_json_schema
 
 __all__ = ["convert_ulog", "ulog_topic_name", "UlogLog"]
 

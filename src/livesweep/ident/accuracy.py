@@ -43,8 +43,8 @@ import math
 
 import numpy as np
 
-from livesweep.numbers import finite_or_none
-from livesweep.numbers import frozen_array as _frozen
+from livesweep.numeric import finite_or_none
+from livesweep.numeric import frozen_array as _frozen
 
 __all__ = ["Accuracy", "accuracy_from_jacobian", "MONTE_CARLO_SCATTER_OVER_CR", "MAX_CRAMER_RAO_PCT",
            "parameter_report", "guideline_failures", "pct_text", "NOT_DETERMINED_PCT", "MAX_INSENSITIVITY_PCT",

@@ -53,7 +53,7 @@ from livesweep.ident.residual_space import (PairResidual, ResidualSpace, band_of
 from livesweep.ident.selection import (FALSE_ALARM, NOISE_INFLATION, effective_points, indistinguishable, prefers,
                                        significance)
 from livesweep.ident.state_space import StateSpaceFit, StateSpaceModel, fit_state_space, refit_state_space
-from livesweep.numbers import finite_or_none
+from livesweep.numeric import finite_or_none
 
 __all__ = ["KINDS", "FALSE_ALARM", "MIN_RELATIVE_COST_DROP", "FIXABLE_ROLES", "FREQUENCY_ROLES",
            "CLEAR_EVIDENCE_FACTOR", "ONLY_PARAMETER_CR_PCT", "PARTIAL", "PairResidual", "Candidate", "LoopStep",

@@ -37,7 +37,7 @@ from livesweep.ident.accuracy import (MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT,
 from livesweep.ident.cost import MIN_COHERENCE, N_OMEGA, W_G, W_P, fit_points, residuals, select_band
 from livesweep.ident.expression import compile_entry
 from livesweep.limits import MAX_MODEL_DIMENSION
-from livesweep.numbers import finite_or_none as _num, frozen_array as _frozen
+from livesweep.numeric import finite_or_none as _num, frozen_array as _frozen
 
 __all__ = ["StateSpaceModel", "FittedParameter", "StateSpaceFit", "select_pairs", "a_priori_eliminations",
            "fit_state_space", "refit_state_space", "evaluate_state_space", "REFIT_NFEV", "reduce_structure", "equation_error_start",

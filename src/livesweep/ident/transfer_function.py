@@ -47,7 +47,7 @@ from scipy.optimize import least_squares
 from livesweep.errors import ConfigError, quote
 from livesweep.ident.cost import PairData, fit_points, residuals
 from livesweep.limits import MAX_TF_ORDER
-from livesweep.numbers import frozen_array
+from livesweep.numeric import frozen_array
 from livesweep.spectral.response import FrequencyResponse
 
 __all__ = ["Factor", "Structure", "parse_structure", "TransferFunctionModel", "FittedTransferFunction",

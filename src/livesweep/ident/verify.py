@@ -64,7 +64,7 @@ import numpy as np
 
 from livesweep.errors import ConfigError
 from livesweep.lti import discretize_foh
-from livesweep.numbers import finite_or_none as _num
+from livesweep.numeric import finite_or_none as _num
 
 __all__ = ["J_RMS_MAX", "TIC_MAX", "OutputFit", "Verification", "verify", "simulate_response"]
 

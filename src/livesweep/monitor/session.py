@@ -91,7 +91,7 @@ def _as_recorded(payload: dict) -> dict:
     try:
         text = json.dumps(payload, separators=(",", ":"), allow_nan=False)
     except (TypeError, ValueError):
-        from livesweep.numbers import json_safe
+        from livesweep.numeric import json_safe
 
         text = json.dumps(json_safe(payload)[0], separators=(",", ":"), allow_nan=False)
     return json.loads(text)

@@ -16,7 +16,7 @@ The update is a dict; every key is optional (a missing or None value is shown as
     Time since that test point opened [s].
 ``test_point_loss`` : float or None
     Fraction of its frames that test point has lost so far (0..1; its last judgement's
-    :class:`~livesweep.spectral.test_point.DataLoss`); shown from 0.1 % on.
+    :class:`~livesweep.spectral.verdict.DataLoss`); shown from 0.1 % on.
 ``verdict`` : str
     ``"WAIT"``, ``"GO"`` or ``"NO-GO"``, or the last test point's label (``"NO-GO (link)"``).
 ``sweep`` : dict of str -> float or None

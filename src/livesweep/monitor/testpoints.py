@@ -27,7 +27,7 @@ authority (``sources`` in a map's ``[test_points]`` table selects them):
 While a test point is open its aligned samples are kept (up to ``MAX_TEST_POINT_S``) and judged
 every ``JUDGE_EVERY_S`` of data over the band swept so far (a *running* verdict: "GO so far, 0.5-2.9
 Hz of 0.5-12 Hz swept"); when it closes it is judged once, over all of it and the whole band
-(:func:`livesweep.spectral.test_point.judge_test_point`). A closing verdict that differs from the
+(:func:`livesweep.spectral.verdict.judge_test_point`). A closing verdict that differs from the
 last running one says why. The monitor closes a test point whose telemetry stopped
 (:data:`LOST_TOPIC`: no frame of the vehicle for ``LOST_AFTER_S``) NO-GO with "telemetry lost",
 unless its sweep was already over (the autopilot's chirp had ended, or a detected sweep's input had
@@ -36,10 +36,10 @@ Everything depends on the frames and samples alone, so a replay reproduces the t
 
 **Data loss.** Each block comes with the times of the samples each signal brought to it (on the
 vehicle clock), so a test point knows, over its own span, how many frames each of its signals
-missed (:func:`~livesweep.spectral.test_point.frames_missing`) and how many of its grid samples
+missed (:func:`~livesweep.spectral.verdict.frames_missing`) and how many of its grid samples
 fell in gaps; a live monitor also reads its link counters (kernel drops, MAVLink sequence gaps,
 frames the analysis skipped) when the test point opens and each time it is judged. The verdict says
-the loss first when it is large enough to matter (:class:`~livesweep.spectral.test_point.DataLoss`);
+the loss first when it is large enough to matter (:class:`~livesweep.spectral.verdict.DataLoss`);
 the counts from the samples are what a replay of the recording finds again, the link counters are
 the live run's alone (a file has no link).
 """
@@ -57,7 +57,7 @@ from livesweep.monitor.systemid import SAME_START_S, SystemIdWatch, better_injec
 from livesweep.monitor.systemid import TOPICS as SYSTEMID_TOPICS
 from livesweep.monitor.vehicle import VehicleInfo, axis_name
 from livesweep.spectral.injection import SweepInjection
-from livesweep.spectral.test_point import DataLoss, TestPointJudgement, judge_test_point
+from livesweep.spectral.verdict import DataLoss, TestPointJudgement, judge_test_point
 from livesweep.telemetry.frames import Frame
 
 __all__ = ["TestPointEvent", "TestPoint", "TestPointTracker", "SOURCES", "MARKER_TOPIC", "LOST_TOPIC",

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from livesweep.numbers import percent, points
+from livesweep.numeric import percent, points
 from livesweep.spectral.adequacy import MIN_COHERENCE, REQUIRED_FRACTION
 
 __all__ = ["percent", "band_text", "duration_text", "time_text", "EPOCH_MIN_S", "md_cell", "md_table", "omega_text", "sweep_text",

@@ -19,7 +19,7 @@ def _worst_cr(fit) -> str:
 
 
 def summary_lines(ident) -> list[str]:
-    """The console summary of an :class:`~livesweep.pipeline.identify.Identification`, one string per line."""
+    """The console summary of an :class:`~livesweep.stages.identify.Identification`, one string per line."""
     out = []
     case, stage = ident.case, ident.frequency_response
     best = ident.responses

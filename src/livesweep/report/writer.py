@@ -12,7 +12,7 @@ from pathlib import Path
 
 from livesweep import __version__
 from livesweep.errors import ConfigError
-from livesweep.numbers import finite_or_none
+from livesweep.numeric import finite_or_none
 from livesweep.report.export import (RESPONSES_CSV, RESPONSES_MAT, gain_units, polynomials, state_space_export,
                                      write_responses_csv, write_responses_mat)
 from livesweep.report.chart import bode_chart, residual_chart, time_history_chart
@@ -96,7 +96,7 @@ def _atomic_write(path: Path, text: str) -> None:
 
 
 def write_report(identification, out_dir, *, plots: bool = True) -> Path:
-    """Write an :class:`~livesweep.pipeline.identify.Identification` to a folder; nothing in it changes.
+    """Write an :class:`~livesweep.stages.identify.Identification` to a folder; nothing in it changes.
 
     Parameters
     ----------
@@ -259,7 +259,7 @@ def _handling(stage, tf, final_fit, before_fit, best, units) -> dict | None:
     """The handling-qualities figures of a transfer function's pair: measured and fitted (the
     stage's), and of the state-space model the report signs (``model``) and, when the residual
     loop changed it, of the model before the loop (``model_before_loop``)."""
-    from livesweep.pipeline.parametric import handling_qualities
+    from livesweep.stages.parametric import handling_qualities
 
     h = (stage.handling or {}).get(tf.name)
     if h is None:

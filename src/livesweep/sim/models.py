@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from livesweep.errors import ConfigError
-from livesweep.numbers import frozen_array as _frozen
+from livesweep.numeric import frozen_array as _frozen
 
 RAD2DEG = 180.0 / np.pi
 G_FT_S2 = 32.174

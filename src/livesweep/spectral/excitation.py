@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from livesweep.errors import ConfigError, require_number
-from livesweep.numbers import percent
+from livesweep.numeric import percent
 from livesweep.spectral.adequacy import MAX_RANDOM_ERROR, MIN_COHERENCE, REQUIRED_FRACTION, pair_adequacy
 from livesweep.spectral.online import OnlineResult
 from livesweep.spectral.response import FrequencyResponse

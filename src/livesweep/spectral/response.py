@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from livesweep.errors import ConfigError
-from livesweep.numbers import frozen_array as _frozen
+from livesweep.numeric import frozen_array as _frozen
 
 __all__ = ["FrequencyResponse", "FrequencyResponseSet", "broken_loop"]
 

@@ -47,7 +47,7 @@ from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as _dialect  # noqa: E402
 
 from livesweep.errors import ConfigError, LivesweepError  # noqa: E402
-from livesweep.numbers import float_json_schema, nonfinite_value  # noqa: E402
+from livesweep.numeric import float_json_schema, nonfinite_value  # noqa: E402
 
 __all__ = [
     "DIALECT",
@@ -204,7 +204,7 @@ def json_schema(msgname: str) -> dict[str, Any]:
 
     Properties: ``sysid``, ``compid``, then every field in ``fieldnames`` order. Floats are
     numbers, or one of the strings ``"NaN"``, ``"Infinity"``, ``"-Infinity"`` for non-finite
-    values (:mod:`livesweep.numbers`; ``null`` in logs written before), integers carry
+    values (:mod:`livesweep.numeric`; ``null`` in logs written before), integers carry
     their C range, ``char[n]`` is a string of at most ``n`` characters and arrays are
     ``{"type": "array", "items": ..., "minItems": n, "maxItems": n}``. A fresh dict is
     returned on every call.

@@ -17,7 +17,7 @@ import numpy as np
 from mcap.well_known import MessageEncoding
 
 from livesweep.errors import LogFormatError, quote
-from livesweep.numbers import NONFINITE_STRINGS
+from livesweep.numeric import NONFINITE_STRINGS
 from livesweep.telemetry.mcap_json import _JSON_KINDS, _at, _BadMessage, _json_object
 from livesweep.telemetry.mcap_read import _read_metadata
 from livesweep.telemetry.mcap_source import _open, _Source

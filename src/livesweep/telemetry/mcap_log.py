@@ -11,7 +11,7 @@ Writing
 
 * Messages are encoded as compact JSON (``separators=(",", ":")``, ``allow_nan=False``).
   Non-finite floats, also nested in lists and dicts, are written as the strings ``"NaN"``,
-  ``"Infinity"`` and ``"-Infinity"`` (:mod:`livesweep.numbers`: JSON has no such numbers, and
+  ``"Infinity"`` and ``"-Infinity"`` (:mod:`livesweep.numeric`: JSON has no such numbers, and
   ``null`` would lose which one it was) and counted per topic
   (:attr:`McapLogWriter.nonfinite_counts`); the counts go into a metadata record named
   ``"livesweep.writer"`` when the writer is closed. The column readers read these strings as NaN
@@ -106,7 +106,7 @@ __all__ = [
 ]
 
 #: The private names this module held before it was split, still importable from here
-#: (livesweep.inspect uses _open, _walk, _json_object, _BadMessage; mcap_recover _MAGIC and
+#: (livesweep.inspection uses _open, _walk, _json_object, _BadMessage; mcap_recover _MAGIC and
 #: _MAX_CHUNK_BYTES; tests _decompress and _DECODE_BATCH).
 _PRIVATE = (
     _MAGIC, _UINT64_MAX, _check_time_ns, _crc_text, _crc_error_text,

@@ -17,7 +17,7 @@ from mcap.writer import CompressionType, Writer
 
 from livesweep.errors import LogFormatError
 from livesweep.locks import check_file_free, install_file
-from livesweep.numbers import json_safe
+from livesweep.numeric import json_safe
 from livesweep.telemetry.mcap_common import _check_time_ns
 from livesweep.telemetry.mcap_write_fast import _FastMessages
 

@@ -26,7 +26,7 @@ from livesweep import __version__
 from livesweep.telemetry.clock import UINT64_NS_MAX
 from livesweep.telemetry.frames import Frame
 from livesweep.errors import LogFormatError
-from livesweep.numbers import float_json_schema
+from livesweep.numeric import float_json_schema
 from livesweep.telemetry.mcap_log import McapLogWriter
 
 __all__ = ["McapRecorder", "RESULT_PREFIX", "RESULT_SCHEMAS", "COUNTERS_METADATA", "RAW_TOPIC"]

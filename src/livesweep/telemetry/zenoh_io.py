@@ -37,7 +37,7 @@ from typing import Any
 import zenoh
 
 from livesweep.errors import ConfigError, LivesweepError
-from livesweep.numbers import json_safe
+from livesweep.numeric import json_safe
 from livesweep.telemetry.clock import UINT64_NS_MAX, StampClock, receive_ns
 from livesweep.telemetry.frames import Frame
 

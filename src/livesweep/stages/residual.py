@@ -20,7 +20,7 @@ from livesweep.config import Case, require_table
 from livesweep.errors import ConfigError
 from livesweep.ident.residual import FALSE_ALARM, KINDS, ResidualLoop, run_residual_loop
 from livesweep.ident.state_space import evaluate_state_space, select_pairs
-from livesweep.pipeline.parametric import VerificationRunner
+from livesweep.stages.parametric import VerificationRunner
 from livesweep.spectral.response import FrequencyResponseSet
 
 __all__ = ["ResidualSettings", "ResidualStage", "residual_settings", "run_residual_stage"]
@@ -105,7 +105,7 @@ def run_residual_stage(case: Case, frs: FrequencyResponseSet, ss, *, runner=None
                        progress=None, settings: ResidualSettings | None = None) -> ResidualStage | None:
     """Run the loop on the state-space stage's result; None when there is nothing to run it on.
 
-    ``runner``: the verification stage's :class:`~livesweep.pipeline.parametric.VerificationRunner`
+    ``runner``: the verification stage's :class:`~livesweep.stages.parametric.VerificationRunner`
     (its records are already loaded); built here when not given and the case has ``[[verify]]``.
     ``settings``: the case's parsed ``[residual]`` (parsed here when not given).
     """

@@ -19,13 +19,13 @@ from typing import Callable
 
 from livesweep.config import Case, load_case
 from livesweep.errors import ConfigError
-from livesweep.pipeline import STAGES
-from livesweep.pipeline.background import Background
-from livesweep.pipeline.frequency_response import FrequencyResponseStage, run_frequency_response_stage
-from livesweep.pipeline.parametric import (StateSpaceStage, TransferFunctionStage, VerificationStage,
+from livesweep.stages import STAGES
+from livesweep.stages.background import Background
+from livesweep.stages.frequency_response import FrequencyResponseStage, run_frequency_response_stage
+from livesweep.stages.parametric import (StateSpaceStage, TransferFunctionStage, VerificationStage,
                                            run_state_space_stage, run_transfer_function_stage,
                                            run_verification_stage, transfer_function_specs)
-from livesweep.pipeline.residual import ResidualSettings, ResidualStage, residual_settings, run_residual_stage
+from livesweep.stages.residual import ResidualSettings, ResidualStage, residual_settings, run_residual_stage
 
 __all__ = ["STAGES", "CaseSpecs", "Identification", "identify", "parse_case_specs"]
 

@@ -27,7 +27,7 @@ from livesweep.limits import MAX_RECORD_VALUES
 from livesweep.spectral.adequacy import (PULSE_LIKE_SLOPE_DB_PER_DECADE, input_power_slope_db_per_decade,
                                          pair_adequacy)
 from livesweep.spectral.analysis import SpectralAnalysis, analyze
-from livesweep.pipeline.background import Background
+from livesweep.stages.background import Background
 from livesweep.telemetry.signals import read_signals
 
 __all__ = ["FrequencyResponseStage", "load_record", "run_frequency_response_stage", "KINEMATIC_PAIRS"]
@@ -102,7 +102,7 @@ def load_record(case: Case, records: tuple[RecordSpec, ...], names: list[str], s
         Receives a note per log that was unfinished (read up to its torn end) or recovered.
     parallel : bool
         Read the next log in a forked child while this one is read
-        (:class:`~livesweep.pipeline.background.Background`); the result is the same.
+        (:class:`~livesweep.stages.background.Background`); the result is the same.
 
     Raises
     ------

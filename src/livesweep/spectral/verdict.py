@@ -56,8 +56,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from livesweep.errors import ConfigError
-from livesweep.numbers import percent as _percent
-from livesweep.numbers import points as _pts
+from livesweep.numeric import percent as _percent
+from livesweep.numeric import points as _pts
 from livesweep.spectral.adequacy import MAX_RANDOM_ERROR, MIN_COHERENCE, REQUIRED_FRACTION
 from livesweep.spectral.analysis import analyze
 from livesweep.spectral.excitation import half_period_frequencies

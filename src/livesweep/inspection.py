@@ -47,7 +47,7 @@ import numpy as np
 
 from livesweep.errors import ConfigError
 from livesweep.monitor.systemid import SAME_START_S, SystemIdWatch, better_injection
-from livesweep.spectral.test_point import NYQUIST_FRACTION
+from livesweep.spectral.verdict import NYQUIST_FRACTION
 
 __all__ = ["TopicInfo", "MapFit", "SystemIdRun", "LogInspection", "inspect_log", "format_inspection",
            "stderr_progress", "STREAM_RATE_HZ"]

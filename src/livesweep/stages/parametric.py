@@ -251,7 +251,7 @@ class VerificationRunner:
     """
 
     def __init__(self, case: Case, sample_rate_hz: float, inputs, outputs):
-        from livesweep.pipeline.frequency_response import load_record
+        from livesweep.stages.frequency_response import load_record
 
         self.inputs, self.outputs = tuple(inputs), tuple(outputs)
         self.units = [case.signals[o].units if o in case.signals else "" for o in self.outputs]
