@@ -89,6 +89,7 @@ def _case_file_tables() -> dict[str, set]:
         "`[[identify]]` and `[[verify]]`": set(config._RECORD_KEYS),
         "`[signals.<name>]`": set(config._SIGNAL_KEYS),
         "`[spectral]`": set(config._SPECTRAL_KEYS),
+        "`[criteria]`": set(config.table_keys(config.Criteria)),
         "`[transfer_functions.<name>]`": set(_TF_KEYS),
         "`[state_space]`": set(_TABLE_KEYS),
         "`[state_space.parameters]`": {"value", "fixed"},     # per entry; checked below
@@ -119,6 +120,17 @@ def test_case_file_keys_match_the_parsers():
             f"extra {sorted(set(keys) - expected[s['text']])})")
         seen.add(s["text"])
     assert seen == set(expected), f"case-file.md has no Keys line for {sorted(set(expected) - seen)}"
+
+
+def test_case_file_reference_tables_are_generated_from_the_settings():
+    """docs/case-file.md's tables of [case], [[identify]], [spectral], [criteria] and [test_points]
+    are what ``python -m livesweep.settings_schema`` writes from the settings dataclasses."""
+    from livesweep.settings_schema import generated_tables, write_docs
+
+    text = (DOCS / "case-file.md").read_text(encoding="utf-8")
+    assert write_docs(text) == text, "docs/case-file.md is stale: run python -m livesweep.settings_schema"
+    for name in generated_tables():
+        assert f"<!-- settings: {name} -->" in text, name
 
 
 def test_residual_min_evidence_is_refused_and_parameters_take_value_and_fixed():

@@ -391,7 +391,7 @@ def test_a_map_file_with_every_new_key_and_the_defaults(tmp_path):
     (('axes = { "7" = "roll" }', 'required = { roll = ["q"] }'), r"test_points\.required\.'roll'\[0\]: names no spectral output \(p\), got 'q'"),
     (('axes = { "7" = "roll" }', 'required = { pitch = ["p"] }'), r"test_points\.required\.'pitch': names no spectral input"),
     (('axes = { "7" = "roll" }', 'sources = ["autopilot", "radio"]'), r"test_points\.sources\[1\]: must be one of autopilot, marker, sweep, got 'radio'"),
-    (('axes = { "7" = "roll" }', 'min_duration_s = -1'), r"test_points\.min_duration_s: must be >= 0 s, got -1"),
+    (('axes = { "7" = "roll" }', 'min_duration_s = -1'), r"test_points\.min_duration_s: must be >= 0, got -1"),
     (('axes = { "7" = "roll" }', 'every = 2'), r"test_points\.every: unknown key 'every'"),
     (('needs = "ATTITUDE"', 'needs = "ATTITUDE"\nauthor = "x"'), r"map\.author: unknown key 'author'"),
     (('stamp = "time_usec"\nstamp_scale = 1e-6\nunits = "us"', 'units = "us"'),

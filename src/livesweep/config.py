@@ -29,12 +29,14 @@ import os
 import re
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from livesweep import limits
 from livesweep.errors import ConfigError, check_band, quote
+from livesweep.settings import (TEST_POINT_SOURCES, Case, ChannelMap, Criteria, RecordSpec, SignalSpec,
+                                SpectralSettings, TestPointSettings)
+from livesweep.settings_schema import read_table, table_keys
 
 __all__ = [
     "SignalSpec",
@@ -45,6 +47,7 @@ __all__ = [
     "channel_map_from_tables",
     "TEST_POINT_SOURCES",
     "SpectralSettings",
+    "Criteria",
     "Case",
     "load_case",
     "load_channel_map",
@@ -61,246 +64,22 @@ _UNREAD_TABLES = {
     "verification": "time-domain verification runs on the [[verify]] records and has no settings",
 }
 #: Every top-level key a case file may hold.
-CASE_KEYS = ("case", "identify", "verify", "signals", "spectral") + RAW_TABLE_KEYS
+CASE_KEYS = ("case", "identify", "verify", "signals", "spectral", "criteria") + RAW_TABLE_KEYS
 
-_CASE_TABLE_KEYS = ("name", "aircraft", "condition")
-_RECORD_KEYS = ("log", "label", "start_s", "end_s")
+_CASE_TABLE_KEYS = table_keys(Case)
+_RECORD_KEYS = table_keys(RecordSpec)
 _SIGNAL_KEYS = ("topic", "field", "stamp", "stamp_topic", "stamp_scale", "scale", "offset", "units", "sysid", "compid",
                 "where")
 #: Top-level tables of a channel map (a case file's keys are accepted too: ``--case`` takes one).
-MAP_KEYS = ("map", "signals", "spectral", "test_points")
+MAP_KEYS = ("map", "signals", "spectral", "test_points", "criteria")
 _MAP_TABLE_KEYS = ("name", "description", "needs", "vehicle", "sysid", "compid")
 #: ``[map.vehicle]`` keys are parameter names (``FRAME_CLASS``) or ``MAV_TYPE`` (the HEARTBEAT type).
 _VEHICLE_KEY = re.compile(r"[A-Z][A-Z0-9_]{0,15}")
-_TEST_POINT_KEYS = ("sources", "axes", "required", "min_duration_s")
-#: Where test points may come from (:mod:`livesweep.monitor.testpoints`).
-TEST_POINT_SOURCES = ("autopilot", "marker", "sweep")
-_DEFAULT_MIN_TEST_POINT_S = 10.0
+_TEST_POINT_KEYS = table_keys(TestPointSettings)
 _MAX_VEHICLE_ID = 255           # MAVLink system and component ids are one byte
-_SPECTRAL_KEYS = ("inputs", "outputs", "band_rad_s", "sample_rate_hz", "windows_s", "overlap", "n_freq",
-                  "references")
-_MAX_OVERLAP = 0.95
+_SPECTRAL_KEYS = table_keys(SpectralSettings)
 #: A signal name: letters, digits, ``_``, and ``.``/``-`` inside (never ``..``); never a path.
 _SIGNAL_NAME = re.compile(r"[A-Za-z0-9_](?:[A-Za-z0-9_.\-]*[A-Za-z0-9_])?")
-
-
-# --------------------------------------------------------------------------------------------
-# results
-# --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class SignalSpec:
-    """Where a named signal lives in a log and how to turn the raw field into engineering units.
-
-    Attributes
-    ----------
-    name : str
-        The signal's name in the case (``"p"``, ``"da"``).
-    topic : str
-        MCAP channel topic, e.g. ``"/mavlink/HIGHRES_IMU"``.
-    field : str
-        Field of the JSON message (exact key or dotted path, ``"gyro.x"``, ``"servo.0"``), or an
-        arithmetic expression of such fields (``"servo2_raw - servo1_raw"``,
-        :func:`livesweep.telemetry.extract.parse_field`).
-    stamp : str or None
-        Field holding the vehicle time of the sample; None to use the MCAP ``log_time``
-        (receive time, ns).
-    stamp_topic : str or None
-        The topic whose ``stamp`` field times this signal, when its own messages carry no time
-        (MAVLink PID_TUNING): each message takes the stamp of the latest message of that topic
-        received before it (ArduCopter sends both in one telemetry tick), so the signal is on the
-        vehicle clock at any replay speed. None: ``stamp`` is a field of the signal's own topic.
-    stamp_scale : float
-        Seconds per stamp unit (``1e-6`` for ``time_usec``). 1.0 when ``stamp`` is None.
-    scale, offset : float
-        ``value = scale * raw + offset`` in ``units`` (``raw``: the field, or the expression's value).
-    units : str
-        Units of the scaled value (free text, e.g. ``"deg/s"``).
-    sysid, compid : int or None
-        Take only messages of this MAVLink system / component (their ``sysid`` / ``compid``
-        fields); None: any (the live aligner then follows the first vehicle it sees).
-    where : tuple of (str, number)
-        Take only messages whose field equals the value, every pair at once (``(("axis", 1),)``
-        for the roll axis of MAVLink PID_TUNING, ``(("I", 0),)`` for a DataFlash instance). A
-        mapping or a list of pairs is accepted and stored as a tuple of pairs.
-    """
-
-    name: str
-    topic: str
-    field: str
-    stamp: str | None = None
-    stamp_scale: float = 1.0
-    scale: float = 1.0
-    offset: float = 0.0
-    units: str = ""
-    sysid: int | None = None
-    compid: int | None = None
-    where: tuple = ()
-    stamp_topic: str | None = None
-
-    def __post_init__(self) -> None:
-        w = self.where
-        pairs = tuple(w.items()) if isinstance(w, Mapping) else tuple(tuple(p) for p in (w or ()))
-        if any(len(p) != 2 for p in pairs):
-            raise TypeError(f"signal {self.name!r}: where must be field -> value pairs, got {w!r}")
-        object.__setattr__(self, "where", pairs)
-
-
-@dataclass(frozen=True)
-class RecordSpec:
-    """One log (or a time slice of it) to read.
-
-    Attributes
-    ----------
-    log : pathlib.Path
-        The MCAP file, resolved relative to the case file.
-    label : str
-        Words for reports (``"aileron sweeps x2"``).
-    start_s, end_s : float or None
-        Slice ``[start_s, end_s)`` on the signals' stamp clock [s]; None for the start or end of
-        the log.
-    """
-
-    log: Path
-    label: str = ""
-    start_s: float | None = None
-    end_s: float | None = None
-
-
-@dataclass(frozen=True)
-class SpectralSettings:
-    """Spectral settings of a case or channel map.
-
-    Attributes
-    ----------
-    inputs, outputs : tuple of str
-        Signal names (disjoint; every name is in ``[signals]``).
-    band_rad_s : (float, float)
-        Frequency band of interest [rad/s], ``0 < lo < hi < pi * sample_rate_hz``.
-    sample_rate_hz : float
-        Uniform resampling rate [Hz].
-    windows_s : tuple of float or None
-        Window lengths for the composite [s]; None lets the spectral stage choose.
-    overlap : float
-        Window overlap fraction in ``[0, 0.95]``.
-    n_freq : int
-        Number of frequency points over the band.
-    references : tuple of str or None
-        One exogenous reference per input (e.g. the logged sweep injection of a closed-loop test
-        point), in ``inputs`` order; the responses are then formed as (y/r)(u/r)^-1, free of the
-        bias of disturbances fed back into the inputs (docs/method.md §4.6). None: plain MISO.
-    """
-
-    inputs: tuple[str, ...]
-    outputs: tuple[str, ...]
-    band_rad_s: tuple[float, float]
-    sample_rate_hz: float
-    windows_s: tuple[float, ...] | None = None
-    overlap: float = 0.8
-    n_freq: int = 150
-    references: tuple[str, ...] | None = None
-
-
-@dataclass(frozen=True)
-class TestPointSettings:
-    """A channel map's ``[test_points]`` table: where test points come from and what each must cover.
-
-    Attributes
-    ----------
-    sources : tuple of str
-        Evidence that opens and closes a test point, any of ``"autopilot"`` (ArduPilot SystemID),
-        ``"marker"`` (the operator) and ``"sweep"`` (detected oscillation); default all three.
-    axes : dict of int -> str
-        ArduPilot ``SID_AXIS`` number -> the input that axis sweeps (1/2/3 input roll/pitch/yaw,
-        4/5/6 recovery, 7/8/9 rate, 10/11/12 mixer, 13 mixer thrust); empty by default.
-    required : dict of str -> tuple of str
-        For every input of ``[spectral]``: the outputs whose pairs must be adequate when it is
-        swept. An input the table does not name gets the output at its own list position (or
-        every output when there are fewer outputs than that).
-    min_duration_s : float
-        A detected sweep shorter than this is no test point [s]; default 10.
-    """
-
-    __test__ = False                  # not a pytest class, whatever its name says
-
-    sources: tuple[str, ...] = TEST_POINT_SOURCES
-    axes: dict = field(default_factory=dict)
-    required: dict = field(default_factory=dict)
-    min_duration_s: float = _DEFAULT_MIN_TEST_POINT_S
-
-
-@dataclass(frozen=True)
-class ChannelMap:
-    """A validated channel map (a named preset or a file).
-
-    Attributes
-    ----------
-    name : str
-        ``[map].name`` (a preset's name); the file name without ``.toml`` when absent.
-    description, needs : str
-        ``[map].description`` and ``[map].needs`` (what telemetry, rates and parameters it needs);
-        empty when absent.
-    path : pathlib.Path
-        The file (resolved).
-    signals : dict[str, SignalSpec]
-        ``[signals]``, in file order.
-    spectral : SpectralSettings or None
-        ``[spectral]``; None when absent.
-    test_points : TestPointSettings or None
-        ``[test_points]`` with its defaults filled in; None when the table is absent.
-    vehicle : dict of str -> tuple of float
-        ``[map.vehicle]``: the vehicle this map is made for, as parameter values
-        (``FRAME_CLASS``, ``FRAME_TYPE``) and ``MAV_TYPE`` (its HEARTBEAT type), each one or more
-        allowed values; the monitor and ``inspect`` check them against what the vehicle says.
-    system : (int, int or None) or None
-        ``[map].sysid`` and ``[map].compid``: the MAVLink system (and component) the monitor
-        analyses; None: the first vehicle that sends every mapped signal
-        (:class:`~livesweep.telemetry.align.GridAligner`).
-    """
-
-    name: str
-    description: str
-    needs: str
-    path: Path
-    signals: dict[str, SignalSpec]
-    spectral: SpectralSettings | None
-    test_points: TestPointSettings | None
-    vehicle: dict = field(default_factory=dict)
-    system: tuple | None = None
-
-
-@dataclass(frozen=True)
-class Case:
-    """A validated case file.
-
-    Attributes
-    ----------
-    path : pathlib.Path
-        The case file (resolved).
-    name, aircraft, condition : str
-        From ``[case]``.
-    identify, verify : tuple of RecordSpec
-        Records to identify from (concatenated in order) and to verify against.
-    signals : dict[str, SignalSpec]
-        From ``[signals]``, in file order.
-    spectral : SpectralSettings or None
-        From ``[spectral]``; None when the table is absent.
-    tables : dict
-        The raw TOML tables of later stages (any of ``transfer_functions``, ``state_space``,
-        ``residual`` that are present), unparsed here; ``identify`` parses them once into typed
-        specs (:func:`livesweep.stages.identify.parse_case_specs`).
-    """
-
-    path: Path
-    name: str
-    aircraft: str
-    condition: str
-    identify: tuple[RecordSpec, ...]
-    verify: tuple[RecordSpec, ...]
-    signals: dict[str, SignalSpec]
-    spectral: SpectralSettings | None
-    tables: dict
 
 
 # --------------------------------------------------------------------------------------------
@@ -523,12 +302,7 @@ def _check_signal_name(ctx: _Ctx, name: str) -> None:
 
 
 def _parse_spectral(ctx: _Ctx, raw: Any, signals: Mapping[str, SignalSpec]) -> SpectralSettings:
-    t = _table(ctx, raw, "spectral")
-    _check_keys(ctx, t, _SPECTRAL_KEYS, "spectral")
-    for req in ("inputs", "outputs", "band_rad_s", "sample_rate_hz"):
-        if req not in t:
-            raise ctx.error("spectral", f"missing required key {req!r} "
-                            "(spectral needs inputs, outputs, band_rad_s and sample_rate_hz)")
+    t = read_table(raw, SpectralSettings, "spectral", ctx.path)       # keys, required keys, plain values
     inputs = _string_list(ctx, t["inputs"], "spectral.inputs")
     outputs = _string_list(ctx, t["outputs"], "spectral.outputs")
     for key, names in (("spectral.inputs", inputs), ("spectral.outputs", outputs)):
@@ -539,28 +313,10 @@ def _parse_spectral(ctx: _Ctx, raw: Any, signals: Mapping[str, SignalSpec]) -> S
         if n in outputs:
             raise ctx.error(f"spectral.inputs[{i}]", "is also listed in spectral.outputs; "
                             "a signal is an input or an output, not both", n)
-    fs = _positive(ctx, t["sample_rate_hz"], "spectral.sample_rate_hz")
-    if fs > limits.MAX_SAMPLE_RATE_HZ:
-        raise ctx.error("spectral.sample_rate_hz", f"must be at most {limits.MAX_SAMPLE_RATE_HZ:g} Hz",
-                        t["sample_rate_hz"])
+    fs = t["sample_rate_hz"]
     lo, hi = check_band(t["band_rad_s"], f"{ctx.path}: spectral.band_rad_s", sample_rate_hz=fs)
-    windows: tuple[float, ...] | None = None
-    if "windows_s" in t:
-        w = t["windows_s"]
-        if not isinstance(w, list) or not w:
-            raise ctx.error("spectral.windows_s", "must be a non-empty array of window lengths in s", w)
-        if len(w) > limits.MAX_WINDOWS:
-            raise ctx.error("spectral.windows_s", f"holds {len(w)} window lengths; at most {limits.MAX_WINDOWS}", w)
-        windows = tuple(_positive(ctx, v, f"spectral.windows_s[{i}]") for i, v in enumerate(w))
-        for i, v in enumerate(windows):
-            if v > limits.MAX_WINDOW_S:
-                raise ctx.error(f"spectral.windows_s[{i}]", f"must be at most {limits.MAX_WINDOW_S:g} s", w[i])
-    overlap = _number(ctx, t.get("overlap", 0.8), "spectral.overlap")
-    if not 0.0 <= overlap <= _MAX_OVERLAP:
-        raise ctx.error("spectral.overlap", f"must be in [0, {_MAX_OVERLAP}]", t["overlap"])
-    n_freq = t.get("n_freq", 150)
-    if isinstance(n_freq, bool) or not isinstance(n_freq, int) or not 2 <= n_freq <= limits.MAX_N_FREQ:
-        raise ctx.error("spectral.n_freq", f"must be an integer from 2 to {limits.MAX_N_FREQ}", n_freq)
+    windows = t.get("windows_s")
+    n_freq = t.get("n_freq", SpectralSettings.n_freq)
     n_windows = len(windows) if windows else limits.MAX_WINDOWS     # the stage chooses fewer
     composite = len(outputs) * len(inputs) * n_freq * n_windows
     if composite > limits.MAX_SPECTRAL_VALUES:
@@ -579,23 +335,21 @@ def _parse_spectral(ctx: _Ctx, raw: Any, signals: Mapping[str, SignalSpec]) -> S
             if n in inputs or n in outputs:
                 raise ctx.error(f"spectral.references[{i}]", "is also an input or output; a reference is the "
                                 "exogenous injection, a signal of its own", n)
-    return SpectralSettings(inputs=inputs, outputs=outputs, band_rad_s=(lo, hi), sample_rate_hz=fs,
-                            windows_s=windows, overlap=overlap, n_freq=n_freq, references=references)
+    return SpectralSettings(**{**t, "inputs": inputs, "outputs": outputs, "band_rad_s": (lo, hi),
+                               "references": references})
+
+
+def _parse_criteria(ctx: _Ctx, raw: Any) -> Criteria:
+    """``[criteria]``: what makes a response adequate and a test point GO."""
+    return Criteria(**read_table(raw, Criteria, "criteria", ctx.path))
 
 
 def _parse_test_points(ctx: _Ctx, raw: Any, spectral: SpectralSettings | None) -> TestPointSettings:
     """``[test_points]``: sources, axes, required, min_duration_s (every name a declared input or output)."""
-    t = _table(ctx, raw, "test_points")
-    _check_keys(ctx, t, _TEST_POINT_KEYS, "test_points")
+    t = read_table(raw, TestPointSettings, "test_points", ctx.path)
     if spectral is None:
         raise ctx.error("test_points", "needs a [spectral] table: its names are spectral inputs and outputs")
     inputs, outputs = spectral.inputs, spectral.outputs
-    sources = TEST_POINT_SOURCES
-    if "sources" in t:
-        sources = _string_list(ctx, t["sources"], "test_points.sources")
-        for i, v in enumerate(sources):
-            if v not in TEST_POINT_SOURCES:
-                raise ctx.error(f"test_points.sources[{i}]", f"must be one of {', '.join(TEST_POINT_SOURCES)}", v)
     axes: dict[int, str] = {}
     for k, v in _table(ctx, t.get("axes", {}), "test_points.axes").items():
         key = f"test_points.axes.{quote(k)}"
@@ -620,10 +374,7 @@ def _parse_test_points(ctx: _Ctx, raw: Any, spectral: SpectralSettings | None) -
         if name not in required:
             required[name] = (outputs[k],) if k < len(outputs) else tuple(outputs)
     required = {name: required[name] for name in inputs}
-    min_s = _number(ctx, t.get("min_duration_s", _DEFAULT_MIN_TEST_POINT_S), "test_points.min_duration_s")
-    if min_s < 0:
-        raise ctx.error("test_points.min_duration_s", "must be >= 0 s", t["min_duration_s"])
-    return TestPointSettings(sources=sources, axes=axes, required=required, min_duration_s=min_s)
+    return TestPointSettings(**{**t, "axes": axes, "required": required})
 
 
 def _parse_map_table(ctx: _Ctx, raw: Any) -> dict[str, Any]:
@@ -664,21 +415,16 @@ def _one_clock(ctx: _Ctx, signals: Mapping[str, SignalSpec]) -> None:
 
 
 def _parse_record(ctx: _Ctx, raw: Any, where: str, base: Path) -> RecordSpec:
-    t = _table(ctx, raw, where)
-    _check_keys(ctx, t, _RECORD_KEYS, where)
-    if "log" not in t:
-        raise ctx.error(where, "missing required key 'log' (the MCAP file, relative to the case file)")
+    t = read_table(raw, RecordSpec, where, ctx.path)
     log_text = _string(ctx, t["log"], f"{where}.log")
     log = (base / Path(log_text).expanduser()).resolve()
     if not log.is_file():
         what = "is a directory, not a log file" if log.is_dir() else "does not exist"
         raise ConfigError(f"{ctx.path}: {where}.log: {log} {what} (from log = {log_text!r})")
-    start = _number(ctx, t["start_s"], f"{where}.start_s") if "start_s" in t else None
-    end = _number(ctx, t["end_s"], f"{where}.end_s") if "end_s" in t else None
+    start, end = t.get("start_s"), t.get("end_s")
     if start is not None and end is not None and start >= end:
-        raise ctx.error(f"{where}.start_s", f"must be before end_s = {t['end_s']!r}", t["start_s"])
-    label = _string(ctx, t["label"], f"{where}.label", nonempty=False) if "label" in t else ""
-    return RecordSpec(log=log, label=label, start_s=start, end_s=end)
+        raise ctx.error(f"{where}.start_s", f"must be before end_s = {raw['end_s']!r}", raw["start_s"])
+    return RecordSpec(**{**t, "log": log})
 
 
 def _parse_records(ctx: _Ctx, raw: Any, key: str, base: Path, *, required: bool) -> tuple[RecordSpec, ...]:
@@ -752,10 +498,7 @@ def load_case(path: str | os.PathLike[str]) -> Case:
     _check_keys(ctx, data, CASE_KEYS, "")
     if "case" not in data:
         raise ctx.error("case", "missing: a case file needs a [case] table with at least name")
-    head = _table(ctx, data["case"], "case")
-    _check_keys(ctx, head, _CASE_TABLE_KEYS, "case")
-    if "name" not in head:
-        raise ctx.error("case", "missing required key 'name'")
+    head = read_table(data["case"], Case, "case", ctx.path)
     if "signals" not in data:
         raise ctx.error("signals", "missing: a case file needs a [signals] table")
     base = ctx.path.parent
@@ -763,14 +506,13 @@ def load_case(path: str | os.PathLike[str]) -> Case:
     spectral = _parse_spectral(ctx, data["spectral"], signals) if "spectral" in data else None
     return Case(
         path=ctx.path,
-        name=_string(ctx, head["name"], "case.name"),
-        aircraft=_string(ctx, head["aircraft"], "case.aircraft", nonempty=False) if "aircraft" in head else "",
-        condition=_string(ctx, head["condition"], "case.condition", nonempty=False) if "condition" in head else "",
+        **head,
         identify=_parse_records(ctx, data.get("identify"), "identify", base, required=True),
         verify=_parse_records(ctx, data.get("verify"), "verify", base, required=False),
         signals=signals,
         spectral=spectral,
         tables={k: data[k] for k in RAW_TABLE_KEYS if k in data},
+        criteria=_parse_criteria(ctx, data["criteria"]) if "criteria" in data else Criteria(),
     )
 
 
@@ -842,9 +584,11 @@ def _channel_map(ctx: _Ctx, data: Mapping[str, Any], path: Path, *, one_clock: b
         _one_clock(ctx, signals)
     spectral = _parse_spectral(ctx, data["spectral"], signals) if "spectral" in data else None
     test_points = _parse_test_points(ctx, data["test_points"], spectral) if "test_points" in data else None
+    criteria = _parse_criteria(ctx, data["criteria"]) if "criteria" in data else Criteria()
     return ChannelMap(name=head.get("name", path.stem), description=head.get("description", ""),
                       needs=head.get("needs", ""), path=path, signals=signals, spectral=spectral,
-                      test_points=test_points, vehicle=head.get("vehicle", {}), system=head.get("system"))
+                      test_points=test_points, vehicle=head.get("vehicle", {}), system=head.get("system"),
+                      criteria=criteria)
 
 
 def channel_map_from_tables(tables: Mapping[str, Any], path: str | os.PathLike[str], *,

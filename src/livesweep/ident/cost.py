@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from livesweep.errors import ConfigError
+from livesweep.spectral.criteria import DEFAULT_CRITERIA
 from livesweep.spectral.response import FrequencyResponse
 
 __all__ = ["W_G", "W_P", "N_OMEGA", "MIN_COHERENCE", "coherence_weight", "PairData", "select_band",
@@ -25,7 +26,9 @@ __all__ = ["W_G", "W_P", "N_OMEGA", "MIN_COHERENCE", "coherence_weight", "PairDa
 W_G = 1.0
 W_P = 0.01745
 N_OMEGA = 20
-MIN_COHERENCE = 0.6
+#: The default fit-band threshold: the method's adequacy criterion (a case's ``[criteria]``
+#: min_coherence reaches the fits through the stages' ``min_coherence`` arguments).
+MIN_COHERENCE = DEFAULT_CRITERIA.min_coherence
 
 
 def coherence_weight(coherence) -> np.ndarray:

@@ -9,7 +9,7 @@ Entity layout (every path below is relative to the recording root; Rerun shows i
                                        below the threshold; Coherence:values (exact gamma^2, float64)
                                        and Coherence:kind ("ordinary" or "partial")
     spectra/<out>_<in>/coherence/grid       grid lines and tick labels of that plot
-    spectra/<out>_<in>/coherence/threshold  the coherence threshold (0.6) as a line
+    spectra/<out>_<in>/coherence/threshold  the coherence threshold (the criteria's, 0.6 by default) as a line
     spectra/<out>_<in>/magnitude_db    LineStrips2D, points (log10 omega, |H| [dB]) + a display transform
     spectra/<out>_<in>/magnitude_db/grid   grid lines and labels for that plot
     spectra/<out>_<in>/phase_deg       LineStrips2D, points (log10 omega, phase [deg])
@@ -43,6 +43,8 @@ from collections.abc import Sequence
 
 import rerun as rr
 import rerun.blueprint as rrb
+
+from livesweep.spectral.criteria import DEFAULT_CRITERIA
 
 __all__ = [
     "TIMELINE", "ADEQUACY_PATH", "ALERTS_PATH", "FRACTION_PATH", "TEST_POINTS_PATH", "SWEEP_FREQUENCY_PATH",
@@ -185,7 +187,7 @@ def _focus_view() -> rrb.Spatial2DView:
                              visual_bounds=_visual_bounds(1))
 
 
-def _pair_views(output: str, input: str, n_inputs: int) -> rrb.Vertical:  # noqa: A002
+def _pair_views(output: str, input: str, n_inputs: int, min_coherence: float) -> rrb.Vertical:  # noqa: A002
     """Two stacked views for one pair: coherence, |H| [dB] and phase [deg] against log omega in
     one view (aligned frequency axes), and the coherence waterfall."""
     label = pair_label(output, input)
@@ -195,7 +197,7 @@ def _pair_views(output: str, input: str, n_inputs: int) -> rrb.Vertical:  # noqa
     return rrb.Vertical(
         rrb.Spatial2DView(origin=root,
                           contents=["$origin/coherence/**", "$origin/magnitude_db/**", "$origin/phase_deg/**"],
-                          name=f"{label}  γ², |H| [dB], phase [deg] vs ω [rad/s]; grey: γ² < 0.6",
+                          name=f"{label}  γ², |H| [dB], phase [deg] vs ω [rad/s]; grey: γ² < {min_coherence:g}",
                           visual_bounds=_visual_bounds(n_inputs)),
         rrb.TensorView(origin="/" + waterfall_path(output, input), name=f"{label}  γ² [%] waterfall",
                        slice_selection=rrb.TensorSliceSelection(width=1, height=0),
@@ -207,7 +209,7 @@ def _pair_views(output: str, input: str, n_inputs: int) -> rrb.Vertical:  # noqa
 
 
 def default_blueprint(inputs: Sequence[str], outputs: Sequence[str], *,
-                      history_s: float = 30.0) -> rrb.Blueprint:
+                      history_s: float = 30.0, min_coherence: float = DEFAULT_CRITERIA.min_coherence) -> rrb.Blueprint:
     """The default layout of the live view. Pure: builds objects, logs nothing.
 
     Two tabs. **Test point** (what the operator judges from), three columns: the verdict (with how
@@ -217,7 +219,8 @@ def default_blueprint(inputs: Sequence[str], outputs: Sequence[str], *,
     fraction; the input and output time series (last ``history_s`` seconds of flight time) and the
     sweep time still needed. **All pairs**: one tab per output, each with one column per input
     holding that pair's sliding-window coherence, Bode magnitude and phase (one view) and its
-    coherence waterfall. The time panel starts collapsed (its time bar stays).
+    coherence waterfall. The time panel starts collapsed (its time bar stays). ``min_coherence``:
+    the criteria's coherence threshold, named in the pair views' titles (below it is drawn grey).
     """
     inputs, outputs = list(inputs), list(outputs)
     check_names(inputs, outputs)
@@ -248,7 +251,7 @@ def default_blueprint(inputs: Sequence[str], outputs: Sequence[str], *,
         row_shares=[1.0, 1.0, 0.6],
     )
     n_in = max(1, len(inputs))
-    tabs = [rrb.Horizontal(*[_pair_views(o, i, n_in) for i in inputs], name=o) for o in outputs]
+    tabs = [rrb.Horizontal(*[_pair_views(o, i, n_in, min_coherence) for i in inputs], name=o) for o in outputs]
     pairs = rrb.Tabs(*tabs, name="All pairs (sliding window)") if tabs else rrb.Tabs(name="All pairs (sliding window)")
     main = rrb.Horizontal(status, focus, series, column_shares=[1.0, 1.25, 0.9], name="Test point")
     return rrb.Blueprint(

@@ -11,14 +11,14 @@ import math
 from collections.abc import Sequence
 
 from livesweep.numeric import percent, points
-from livesweep.spectral.adequacy import MIN_COHERENCE, REQUIRED_FRACTION
+from livesweep.spectral.criteria import DEFAULT_CRITERIA
 
 __all__ = ["percent", "band_text", "duration_text", "time_text", "EPOCH_MIN_S", "md_cell", "md_table", "omega_text", "sweep_text",
            "coherence_kind_text", "adequacy_markdown", "markdown_test_points", "test_point_line", "COHERENCE_KINDS",
            "DEFAULT_REQUIRED_FRACTION"]
 
 #: Fraction of the band a required pair must cover (one definition: livesweep.spectral.adequacy).
-DEFAULT_REQUIRED_FRACTION = REQUIRED_FRACTION
+DEFAULT_REQUIRED_FRACTION = DEFAULT_CRITERIA.required_fraction
 
 
 def _finite(x) -> bool:
@@ -133,7 +133,8 @@ def _row_verdict(fraction, band, required: float) -> str:
 
 def adequacy_markdown(t_s: float, rows: Sequence[dict], verdict: str, reasons: Sequence[str], *,
                       coherence_kind: str = "ordinary", sweep: dict | None = None,
-                      required_fraction: float = DEFAULT_REQUIRED_FRACTION, lag_s: float | None = None) -> str:
+                      required_fraction: float = DEFAULT_REQUIRED_FRACTION, lag_s: float | None = None,
+                      min_coherence: float = DEFAULT_CRITERIA.min_coherence) -> str:
     """The status document: verdict, coherence kind, sweep per input, reasons and the adequacy table.
 
     Parameters
@@ -156,6 +157,8 @@ def adequacy_markdown(t_s: float, rows: Sequence[dict], verdict: str, reasons: S
         Threshold of the row verdicts; fractions are printed with :func:`percent` against it.
     lag_s : float, optional
         How far behind the link the view is [s] (said when it is over a second).
+    min_coherence : float
+        The coherence threshold of the criteria judging (stated in the status line).
     """
     behind = f"; **{lag_s:.0f} s behind the link**" if _finite(lag_s) and float(lag_s) >= 1.0 else ""
     lines = [f"## {md_cell(verdict)}", ""]
@@ -163,7 +166,7 @@ def adequacy_markdown(t_s: float, rows: Sequence[dict], verdict: str, reasons: S
         lines += [f"**{md_cell(reasons[0])}**", ""]
         reasons = reasons[1:]
     lines += [f"Flight time {time_text(t_s)}{behind}. Coherence judged: **{coherence_kind_text(coherence_kind)}**, "
-              f"threshold γ² ≥ {MIN_COHERENCE:g}", ""]
+              f"threshold γ² ≥ {min_coherence:g}", ""]
     if sweep:
         lines += [f"- {md_cell(sweep_text(name, *v))}" for name, v in sweep.items()] + [""]
     lines += [f"- {md_cell(r)}" for r in reasons]
@@ -191,7 +194,7 @@ def markdown_test_points(entries: Sequence[tuple[int, dict]], t_s: float) -> str
         ``{"state": "open"|"closed"|..., "start_s", "end_s" (None while open), "source",
         "swept_input", "verdict", "pairs": [{"output", "input", "adequate_fraction",
         "band_rad_s": [lo, hi] or None, "coherence": "ordinary"|"partial"}], "missing": [str, ...]}``
-        (optionally ``"required_fraction"``, default 0.6; ``"label"``, the verdict as shown: "NO-GO
+        (optionally ``"required_fraction"`` or ``"criteria"``, default 0.6; ``"label"``, the verdict as shown: "NO-GO
         (link)"; ``"loss_fraction"``, the fraction of its frames lost, said from 0.1 % on).
     t_s : float
         Flight time now [s] (the open test point's elapsed time).
@@ -227,8 +230,7 @@ def _tp_section(number: int, tp: dict, t_s: float) -> list[str]:
     lost = _num(tp.get("loss_fraction"))
     if lost is not None and lost >= 0.0005:        # what rounds to 0.0 % is not said
         head += f"; **{percent(lost)} of its frames lost**"
-    required = _num(tp.get("required_fraction"))
-    required = DEFAULT_REQUIRED_FRACTION if required is None else required
+    required = _required_fraction(tp)
     missing = [str(m) for m in (tp.get("missing") or [])]
     rows, kinds = [], []
     for p in tp.get("pairs") or []:
@@ -253,6 +255,15 @@ def _tp_section(number: int, tp: dict, t_s: float) -> list[str]:
     return lines
 
 
+def _required_fraction(tp: dict) -> float:
+    """The fraction a test point's pairs had to cover: its ``required_fraction``, else its
+    ``criteria``' one, else the method's."""
+    required = _num(tp.get("required_fraction"))
+    if required is None:
+        required = _num((tp.get("criteria") or {}).get("required_fraction"))
+    return DEFAULT_REQUIRED_FRACTION if required is None else required
+
+
 def test_point_line(number: int, tp: dict) -> str:
     """One closed test point in a line: ``"TP1 roll (autopilot, 78.6 s - 128.6 s): GO; p/roll 100 %
     adequate of 3.14 – 75.4 rad/s (+40 points)"``, what its data lost ("27 % of its frames lost")
@@ -261,13 +272,14 @@ def test_point_line(number: int, tp: dict) -> str:
     span = f"{time_text(start)} - {time_text(end)}" if start is not None and end is not None else "?"
     head = f"TP{number} {tp.get('swept_input') or '?'} ({tp.get('source', '?')}, {span}): {tp.get('label') or tp.get('verdict')}"
     band = tp.get("judged_band_rad_s")
+    required = _required_fraction(tp)
     parts = []
     for p in tp.get("pairs") or []:
         frac = p.get("adequate_fraction")
         if _finite(frac):
             where = f" of {band_text(band)} rad/s" if band else ""
-            parts.append(f"{p.get('output')}/{p.get('input')} {percent(frac, DEFAULT_REQUIRED_FRACTION)} adequate{where} "
-                         f"({points(frac, DEFAULT_REQUIRED_FRACTION)})")
+            parts.append(f"{p.get('output')}/{p.get('input')} {percent(frac, required)} adequate{where} "
+                         f"({points(frac, required)})")
     line = head + ("; " + ", ".join(parts) if parts else "")
     lost = _num(tp.get("loss_fraction"))
     if lost is not None and lost >= 0.0005:        # what rounds to 0.0 % is not said

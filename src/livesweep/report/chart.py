@@ -14,14 +14,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from livesweep.ident.cost import MIN_COHERENCE
+from livesweep.spectral.criteria import DEFAULT_CRITERIA
 from livesweep.spectral.response import FrequencyResponse
 
 __all__ = ["Line", "Band", "HLine", "Panel", "Chart", "COLORS", "ADEQUATE_COHERENCE", "bode_chart",
            "time_history_chart", "residual_chart"]
 
 #: coherence from which a point is drawn bold and sets the axis limits: the fitting guideline
-ADEQUATE_COHERENCE = MIN_COHERENCE
+ADEQUATE_COHERENCE = DEFAULT_CRITERIA.min_coherence
 
 #: the colour cycle (matplotlib's "tab10"), so both renderers draw the same colours
 COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
@@ -150,7 +150,8 @@ class Chart:
 
 def bode_chart(response: FrequencyResponse, *, title: str = "", units: tuple[str, str] = ("", ""),
                ordinary: FrequencyResponse | None = None, models: list | None = None,
-               fit_band_rad_s: tuple | None = None, fit_band_label: str | None = None) -> Chart:
+               fit_band_rad_s: tuple | None = None, fit_band_label: str | None = None,
+               min_coherence: float = ADEQUATE_COHERENCE) -> Chart:
     """Magnitude [dB], phase [deg] and coherence against frequency [rad/s] of one pair.
 
     Parameters
@@ -170,11 +171,14 @@ def bode_chart(response: FrequencyResponse, *, title: str = "", units: tuple[str
         The band the models were fitted over (shaded).
     fit_band_label : str, optional
         The shaded band's legend entry (default "fit band").
+    min_coherence : float
+        The coherence threshold of the criteria that judged the response: points below it are
+        drawn faint, and it is the dashed line on the coherence panel.
 
     Returns
     -------
     Chart
-        The whole estimate faint, the points with coherence >= ``ADEQUATE_COHERENCE`` bold with
+        The whole estimate faint, the points with coherence >= ``min_coherence`` bold with
         +/-1 random error shaded; the axis limits follow the coherent points and the models over
         the coherent frequencies (a model far from the data is cut at the axes, never draws the
         data small); model phase on the data's branch.
@@ -183,12 +187,12 @@ def bode_chart(response: FrequencyResponse, *, title: str = "", units: tuple[str
     eps = np.where(np.isfinite(response.random_error), response.random_error, np.nan)
     mag, ph = np.asarray(response.magnitude_db, float), np.asarray(response.phase_deg, float)
     coh = np.asarray(response.coherence, float)
-    good = np.isfinite(mag) & np.isfinite(ph) & (coh >= ADEQUATE_COHERENCE)
+    good = np.isfinite(mag) & np.isfinite(ph) & (coh >= min_coherence)
     shown = good if good.any() else np.isfinite(mag) & np.isfinite(ph)
     label = "conditioned (MISO)" if response.conditioned else "composite"
     c0 = color(0)
     mag_lines = [Line(w, mag, c0, 0.8, alpha=0.35),
-                 Line(w, np.where(good, mag, np.nan), c0, 1.8, label=f"{label}, γ² ≥ {ADEQUATE_COHERENCE:g}")]
+                 Line(w, np.where(good, mag, np.nan), c0, 1.8, label=f"{label}, γ² ≥ {min_coherence:g}")]
     ph_lines = [Line(w, ph, c0, 0.8, alpha=0.35), Line(w, np.where(good, ph, np.nan), c0, 1.8)]
     band_db = np.where(good, 20.0 / np.log(10.0) * eps, np.nan)        # dB of a relative error eps
     band_deg = np.where(good, np.rad2deg(eps), np.nan)
@@ -199,7 +203,7 @@ def bode_chart(response: FrequencyResponse, *, title: str = "", units: tuple[str
         both = shown & np.isfinite(ph_o)
         if both.any():      # the same branch as the conditioned estimate: no 360 deg jump between them
             ph_o = ph_o + 360.0 * np.round(np.median(ph[both] - ph_o[both]) / 360.0)
-        ok_o = np.asarray(ordinary.coherence, float) >= ADEQUATE_COHERENCE
+        ok_o = np.asarray(ordinary.coherence, float) >= min_coherence
         mag_lines.append(Line(w, np.where(ok_o, ordinary.magnitude_db, np.nan), color(1), 0.8, label="ordinary (SISO)"))
         ph_lines.append(Line(w, np.where(ok_o, ph_o, np.nan), color(1), 0.8))
     ref_w = w[shown][0] if shown.any() else w[0]
@@ -239,7 +243,7 @@ def bode_chart(response: FrequencyResponse, *, title: str = "", units: tuple[str
                  x_tick_labels=False, y_angle=True)
     p_coh = Panel(lines=(Line(w, coh, color(2), 1.4,
                               label="partial coherence" if response.conditioned else "coherence"),),
-                  hlines=(HLine(ADEQUATE_COHERENCE, dashed=True),), x_span=span, y_limits=(0.0, 1.05), y_label="γ²",
+                  hlines=(HLine(min_coherence, dashed=True),), x_span=span, y_limits=(0.0, 1.05), y_label="γ²",
                   x_label="frequency [rad/s]", legend="lower left")
     return Chart(rows=((p_mag,), (p_ph,), (p_coh,)), title=title or f"{response.output} / {response.input}",
                  size_in=(7.5, 8.0), height_ratios=(3.0, 3.0, 1.6), margins=(0.12, 0.97, 0.94, 0.07), hspace=0.08)

@@ -28,7 +28,7 @@ def summary_lines(ident) -> list[str]:
     out.append(f"{case.name}: {len(best.outputs)} outputs x {len(best.inputs)} inputs, "
                f"{'MISO-conditioned' if best.conditioned else 'SISO'} composite of windows {best.settings['windows_s']} s "
                f"over {dq['duration_s']:.0f} s at {dq['sample_rate_hz']:g} Hz")
-    out.append(f"  {'pair':12s} {'adequate':>9s}  widest band gamma^2>=0.6, eps<=0.2 [rad/s]")
+    out.append(f"  {'pair':12s} {'adequate':>9s}  widest band {case.criteria.ascii()} [rad/s]")
     for a in stage.adequacy:
         band = "-" if a.widest_band_rad_s is None else "%.2f .. %.2f" % a.widest_band_rad_s
         out.append(f"  {a.output + '/' + a.input:12s} {100 * a.fraction:8.0f}%  {band}")

@@ -13,7 +13,7 @@ from __future__ import annotations
 import html
 import math
 
-from livesweep.report.summary import GUIDELINES, cr_text, modes, stage_summary
+from livesweep.report.summary import GUIDELINES, cr_text, guidelines, modes, report_criteria, stage_summary
 
 __all__ = ["render"]
 
@@ -94,7 +94,7 @@ def _first_screen(report: dict, summary: list[dict]) -> str:
 
 def _data_quality(report: dict) -> str:
     dq = report["data_quality"]
-    g = GUIDELINES
+    g = guidelines(report)
     rows = []
     for ex in dq["excitation"]:
         band = ex["widest_band_rad_s"]
@@ -142,7 +142,7 @@ def _responses(report: dict) -> str:
     cond = any(r.get("conditioned") for r in report["frequency_responses"])
     return ("<h2 id='responses'>Frequency responses</h2><p>Composite of the windows in the summary"
             + ("; conditioned on the other inputs (MISO): partial coherence, the ordinary (SISO) estimate thin" if cond
-               else "") + f". Points with γ² below {GUIDELINES['coherence']} are drawn faint and left out of the axis "
+               else "") + f". Points with γ² below {guidelines(report)['coherence']:g} are drawn faint and left out of the axis "
             "limits; the band shows ±1 random error. Data: <code>frequency_response_set.json</code>, "
             "<code>frequency_responses.csv</code>, <code>frequency_responses.mat</code>.</p>"
             + (figs or "<p>Plots were not written (<code>--no-plots</code>).</p>"))
@@ -450,7 +450,7 @@ rate bias.</li>
 cross-spectra are averaged; the windows are combined into one composite estimate weighted by their random error.
 With several inputs the responses are conditioned on the other inputs (MISO), with partial coherence. The random
 error of a point is ε<sub>r</sub> = √(1 − γ²) / (|γ| √(2 n<sub>d</sub>)) with n<sub>d</sub> the effective number of
-averages. A point is adequate when γ² ≥ 0.6 and ε<sub>r</sub> ≤ 0.2.</li>
+averages. A point is adequate when γ² ≥ {min_coherence:g} and ε<sub>r</sub> ≤ {max_random_error:g}{criteria_source}.</li>
 <li><b>Transfer functions.</b> Gain, poles, zeros and delay minimise
 J = (20/n<sub>ω</sub>) Σ W<sub>γ</sub> [(|T̂| − |T|)² + 0.01745 (∠T̂ − ∠T)²] (magnitude in dB, phase in deg,
 W<sub>γ</sub> = [1.58 (1 − e<sup>−γ²</sup>)]², 20 points over the pair's coherent band). J ≤ 100 is acceptable,
@@ -476,6 +476,14 @@ modes are shown, not flagged: many airframes are unstable without their flight c
 """
 
 
+def _appendix(report: dict) -> str:
+    """The method appendix, stating the criteria that judged this report."""
+    c = report_criteria(report)
+    source = "" if c == report_criteria({}) else " (this case's [criteria]; the method's are γ² ≥ 0.6 and ε<sub>r</sub> ≤ 0.2)"
+    return (_APPENDIX.replace("{min_coherence:g}", f"{c.min_coherence:g}")
+            .replace("{max_random_error:g}", f"{c.max_random_error:g}").replace("{criteria_source}", source))
+
+
 def render(report: dict) -> str:
     """The HTML of a ``report.json`` dictionary (plots referenced as ``plots/*.svg``)."""
     summary = stage_summary(report)
@@ -488,6 +496,6 @@ def render(report: dict) -> str:
            + " · <a href='#appendix'>method</a></p>")
     body = (_first_screen(report, summary) + toc + _data_quality(report) + _responses(report)
             + _transfer_functions(report) + _state_space(report) + _verification(report) + _residual(report)
-            + _APPENDIX)
+            + _appendix(report))
     return (f"<!doctype html><html lang='en'><head><meta charset='utf-8'><title>livesweep: {e(report['case']['name'])}"
             f"</title><style>{_CSS}</style></head><body>{body}</body></html>")

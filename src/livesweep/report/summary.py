@@ -12,14 +12,15 @@ import math
 from livesweep.ident.accuracy import (MAX_COST, MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT,
                                       NOT_DETERMINED_PCT, pct_text)
 from livesweep.ident.verify import J_RMS_MAX, TIC_MAX
-from livesweep.spectral.adequacy import MAX_RANDOM_ERROR, MIN_COHERENCE
+from livesweep.spectral.criteria import DEFAULT_CRITERIA, Criteria
 
-__all__ = ["GUIDELINES", "stage_summary", "modes", "cr_text", "figure"]
+__all__ = ["GUIDELINES", "guidelines", "report_criteria", "stage_summary", "modes", "cr_text", "figure"]
 
-#: The guidelines the flags test (method: Tischler & Remple; the report's appendix).
+#: The guidelines the flags test (method: Tischler & Remple; the report's appendix), with the
+#: method's criteria; a report judged by other criteria reads them through :func:`guidelines`.
 GUIDELINES = {
-    "coherence": MIN_COHERENCE,          # gamma^2 at least this, with
-    "random_error": MAX_RANDOM_ERROR,    # eps_r at most this, counts as an adequate frequency point
+    "coherence": DEFAULT_CRITERIA.min_coherence,          # gamma^2 at least this, with
+    "random_error": DEFAULT_CRITERIA.max_random_error,    # eps_r at most this, counts as an adequate frequency point
     "coverage": 0.5,             # a pair is flagged when adequate over less than this fraction of its band
     "cost_tf": MAX_COST,                 # J of a transfer-function fit (<= 50 excellent)
     "cost_ss": MAX_COST_AVERAGE,         # J_ave of the state-space fit
@@ -30,6 +31,17 @@ GUIDELINES = {
     "zeta_max": 2.0,             # a second-order factor more damped than this is two first-order ones
     "not_identifiable_pct": NOT_DETERMINED_PCT,   # CR beyond this: the data say nothing about the parameter
 }
+
+
+def report_criteria(report: dict) -> Criteria:
+    """The criteria that judged a ``report.json`` (its ``criteria``; the method's when absent)."""
+    return Criteria.from_dict(report.get("criteria"))
+
+
+def guidelines(report: dict) -> dict:
+    """:data:`GUIDELINES` with the coherence and random-error thresholds of the report's criteria."""
+    c = report_criteria(report)
+    return {**GUIDELINES, "coherence": c.min_coherence, "random_error": c.max_random_error}
 
 
 def cr_text(pct) -> str:
@@ -80,7 +92,7 @@ def stage_summary(report: dict) -> list[dict]:
     ``info`` are facts worth knowing that are not failures (an unstable mode of an unstable
     airframe, repairs made to the data).
     """
-    g = GUIDELINES
+    g = guidelines(report)
     out = []
     dq = report.get("data_quality") or {}
     ran = report.get("stages") or []

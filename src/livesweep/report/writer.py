@@ -165,7 +165,8 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
             _write_svg(bode_chart(pair, title=f"{case.name}: {pair.output} / {pair.input}",
                                   units=(units.get(pair.output, ""), units.get(pair.input, "")), ordinary=ordinary,
                                   models=models, fit_band_rad_s=band[0] if band else None,
-                                  fit_band_label=band[1] if band else None), out / rel)
+                                  fit_band_label=band[1] if band else None,
+                                  min_coherence=case.criteria.min_coherence), out / rel)
         responses.append({**pair.to_dict(), "output_units": units.get(pair.output, ""),
                           "input_units": units.get(pair.input, ""), "plot": rel if draw else None})
     report = {
@@ -176,6 +177,7 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
         "stages": ["frequency-response"],
         "frequency_responses": responses,
         "spectral_settings": best.settings,
+        "criteria": case.criteria.to_dict(),
         "data_quality": {**stage.data_quality, "notes": list(stage.data_quality["notes"])},   # a copy: stages stay as computed
     }
     stages = report["stages"]

@@ -7,14 +7,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from livesweep.spectral.criteria import DEFAULT_CRITERIA, Criteria
 from livesweep.spectral.response import FrequencyResponse
 
 __all__ = ["PairAdequacy", "pair_adequacy", "input_power_slope_db_per_decade", "PULSE_LIKE_SLOPE_DB_PER_DECADE", "MIN_COHERENCE", "MAX_RANDOM_ERROR", "REQUIRED_FRACTION"]
 
-MIN_COHERENCE = 0.6
-MAX_RANDOM_ERROR = 0.2
-#: Fraction of the band (decades) a required pair must cover for a GO, live and over a test point.
-REQUIRED_FRACTION = 0.6
+#: The method's criteria, for code that has no settings to take them from (the defaults of
+#: :class:`~livesweep.spectral.criteria.Criteria`; stages and the monitor use the case's or map's).
+MIN_COHERENCE = DEFAULT_CRITERIA.min_coherence
+MAX_RANDOM_ERROR = DEFAULT_CRITERIA.max_random_error
+REQUIRED_FRACTION = DEFAULT_CRITERIA.required_fraction
 #: Input power falling faster than this across the band [dB/decade] looks pulse-like (doublets),
 #: not swept (measured: the shipped XV-15 sweeps -9, their verification doublets -19 and -26 over
 #: 1-20 rad/s; a constant-amplitude exponential sweep falls 10 in theory).
@@ -23,7 +25,7 @@ PULSE_LIKE_SLOPE_DB_PER_DECADE = -14.0
 
 @dataclass(frozen=True)
 class PairAdequacy:
-    """Where one pair's response is adequate: gamma^2 >= 0.6 and eps_r <= 0.2.
+    """Where one pair's response is adequate by its criteria (gamma^2 >= 0.6 and eps_r <= 0.2 by default).
 
     Attributes
     ----------
@@ -36,6 +38,8 @@ class PairAdequacy:
         Fraction of the grid (log-spaced, so of the decades) that is adequate.
     median_coherence : float
         Over the whole grid.
+    criteria : Criteria
+        The criteria that judged it.
     """
 
     output: str
@@ -44,25 +48,26 @@ class PairAdequacy:
     widest_band_rad_s: tuple | None
     fraction: float
     median_coherence: float
+    criteria: Criteria = DEFAULT_CRITERIA
 
     def to_dict(self) -> dict:
         return {"output": self.output, "input": self.input,
                 "bands_rad_s": [list(b) for b in self.bands_rad_s],
                 "widest_band_rad_s": None if self.widest_band_rad_s is None else list(self.widest_band_rad_s),
                 "fraction_of_band": round(self.fraction, 4), "median_coherence": round(self.median_coherence, 4),
-                "criteria": {"min_coherence": MIN_COHERENCE, "max_random_error": MAX_RANDOM_ERROR}}
+                "criteria": {"min_coherence": self.criteria.min_coherence,
+                             "max_random_error": self.criteria.max_random_error}}
 
 
-def pair_adequacy(resp: FrequencyResponse, min_coherence: float = MIN_COHERENCE,
-                  max_random_error: float = MAX_RANDOM_ERROR) -> PairAdequacy:
-    """Adequate stretches of one response."""
-    ok = (resp.coherence >= min_coherence) & (resp.random_error <= max_random_error)
+def pair_adequacy(resp: FrequencyResponse, criteria: Criteria = DEFAULT_CRITERIA) -> PairAdequacy:
+    """Adequate stretches of one response by ``criteria``."""
+    ok = criteria.adequate(resp.coherence, resp.random_error)
     w = resp.omega
     edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(int), [0]])))
     bands = tuple((float(w[a]), float(w[b - 1])) for a, b in zip(edges[::2], edges[1::2]))
     widest = max(bands, key=lambda b: np.log10(b[1] / b[0]), default=None)
     return PairAdequacy(resp.output, resp.input, bands, widest, float(np.mean(ok)) if ok.size else 0.0,
-                        float(np.median(resp.coherence)) if resp.coherence.size else 0.0)
+                        float(np.median(resp.coherence)) if resp.coherence.size else 0.0, criteria)
 
 
 def input_power_slope_db_per_decade(windows, name: str, band_rad_s) -> float:

@@ -29,7 +29,8 @@ import numpy as np
 
 from livesweep.errors import ConfigError, require_number
 from livesweep.numeric import percent
-from livesweep.spectral.adequacy import MAX_RANDOM_ERROR, MIN_COHERENCE, REQUIRED_FRACTION, pair_adequacy
+from livesweep.spectral.adequacy import pair_adequacy
+from livesweep.spectral.criteria import DEFAULT_CRITERIA, Criteria
 from livesweep.spectral.online import OnlineResult
 from livesweep.spectral.response import FrequencyResponse
 
@@ -361,8 +362,8 @@ class ExcitationMonitor:
         Pairs that must be adequate for GO. Default: the on-axis pairs ``(outputs[k], inputs[k])``
         for ``k < min(len(outputs), len(inputs))`` -- list the outputs in the order of their
         on-axis inputs (e.g. inputs ``da, dr`` and outputs ``p, r, ...``) or pass the pairs.
-    required_fraction : float
-        Fraction of the band (log frequency) each required pair must cover (default 0.6).
+    required_fraction : float, optional
+        Fraction of the band (log frequency) each required pair must cover; default the criteria's.
     saturation_limits : dict of input -> (lo, hi), optional
         Travel limits (input units); a new sample at or beyond one (within ``saturation_margin``
         of the range) raises a ``saturation`` alert.
@@ -398,14 +399,16 @@ class ExcitationMonitor:
         a constant input is quiet). Set it above the noise of a trim with sensor noise.
     saturation_margin : float
         Fraction of the limit range counted as "at the limit" (default 0).
+    criteria : Criteria
+        Where a pair is adequate and what a GO needs (:class:`~livesweep.spectral.criteria.Criteria`).
     """
 
     def __init__(self, inputs, outputs, band_rad_s, sample_rate_hz: float, *, required_pairs=None,
-                 required_fraction: float = REQUIRED_FRACTION, saturation_limits: dict | None = None,
+                 required_fraction: float | None = None, saturation_limits: dict | None = None,
                  collapse_drop: float = 0.3, max_input_coherence: float = 0.5, min_n_eff: float = 3.0,
                  conditioned: bool = False, coverage_drop_db: float = 20.0,
                  collapse_lookback_s: float | None = None, history_s: float | None = None, fit_s: float = 20.0,
-                 quiet_amplitude=None, saturation_margin: float = 0.0):
+                 quiet_amplitude=None, saturation_margin: float = 0.0, criteria: Criteria = DEFAULT_CRITERIA):
         self.inputs, self.outputs = tuple(inputs), tuple(outputs)
         if not self.inputs or not self.outputs:
             raise ConfigError("the excitation monitor needs at least one input and one output")
@@ -421,7 +424,8 @@ class ExcitationMonitor:
             if o not in self.outputs or i not in self.inputs:
                 raise ConfigError(f"required pair {o}/{i} is not an output/input pair of "
                                   f"outputs {list(self.outputs)}, inputs {list(self.inputs)}")
-        self.required_fraction = float(required_fraction)
+        self.criteria = criteria
+        self.required_fraction = float(criteria.required_fraction if required_fraction is None else required_fraction)
         self.saturation_limits = {}
         for k, v in (saturation_limits or {}).items():
             if k not in self.inputs:
@@ -488,7 +492,7 @@ class ExcitationMonitor:
         weights = log_band_weights(w, self.band_rad_s)
         coh_all = np.nan_to_num(rs.coherence, nan=0.0)                 # (n_out, n_in, f), all pairs at once
         eps_all = np.nan_to_num(rs.random_error, nan=np.inf)
-        ok_all = use & (coh_all >= MIN_COHERENCE) & (eps_all <= MAX_RANDOM_ERROR) & np.isfinite(rs.H)
+        ok_all = use & self.criteria.adequate(coh_all, eps_all) & np.isfinite(rs.H)
         frac_all = np.minimum(ok_all.astype(float) @ weights, 1.0)
         med_all = np.median(coh_all[..., use], axis=-1) if np.any(use) else np.zeros(coh_all.shape[:2])
         out, masks = [], {}
@@ -501,7 +505,7 @@ class ExcitationMonitor:
                 if np.any(ok):
                     sub = FrequencyResponse(o, i, w[use], rs.H[a, b, use], np.where(ok[use], coh[use], 0.0),
                                             eps_all[a, b, use], rs.conditioned)
-                    widest = pair_adequacy(sub).widest_band_rad_s
+                    widest = pair_adequacy(sub, self.criteria).widest_band_rad_s
                 out.append(PairStatus(o, i, widest, float(frac_all[a, b]), float(med_all[a, b]),
                                       (o, i) in self.required_pairs))
                 masks[(o, i)] = (coh, ok)

@@ -58,7 +58,8 @@ import numpy as np
 from livesweep.errors import ConfigError
 from livesweep.numeric import percent as _percent
 from livesweep.numeric import points as _pts
-from livesweep.spectral.adequacy import MAX_RANDOM_ERROR, MIN_COHERENCE, REQUIRED_FRACTION
+from livesweep.spectral.adequacy import REQUIRED_FRACTION
+from livesweep.spectral.criteria import DEFAULT_CRITERIA, Criteria
 from livesweep.spectral.analysis import analyze
 from livesweep.spectral.excitation import half_period_frequencies
 from livesweep.spectral.injection import SweepInjection
@@ -94,19 +95,20 @@ MARGINAL_SIGMAS = 1.5
 # (lost independently) the coherence reads gamma^2 / ((1 + L / (1 - L))^2) = (1 - L)^2 gamma^2 there.
 # (A burst that takes every message at once fills both the same way and biases less: the thresholds
 # are for the independent case, a radio's.)
-# Two thresholds follow from the adequacy rule (gamma^2 >= MIN_COHERENCE, eps_r <= MAX_RANDOM_ERROR),
-# none from a test:
+# Two thresholds follow from the adequacy rule (Criteria: gamma^2 >= min_coherence, eps_r <=
+# max_random_error), none from a test; with other criteria they follow those
+# (Criteria.loss_reason_fraction, Criteria.loss_link_fraction):
 #: A loss from this fraction of a test point's frames is the verdict's first reason: at the coherence
 #: threshold, its bias (1 - (1 - L)^2) gamma^2 reaches the coherence estimate's own random error
 #: there, ``2 gamma^2 eps_r sqrt(1 - gamma^2)`` with eps_r at its limit (:func:`coherence_sigma`):
 #: L = 1 - sqrt(1 - 2 * 0.2 * sqrt(0.4)) = 13.6 %. Below it the loss moves a coherence less than the
 #: verdict's own uncertainty does (it is still said, last).
-LOSS_REASON_FRACTION = 1.0 - math.sqrt(1.0 - 2.0 * MAX_RANDOM_ERROR * math.sqrt(1.0 - MIN_COHERENCE))
+LOSS_REASON_FRACTION = DEFAULT_CRITERIA.loss_reason_fraction
 #: A NO-GO on a loss from this fraction reads "NO-GO (link)": (1 - L)^2 = MIN_COHERENCE, L = 22.5 %, so
 #: even a pair of perfect coherence reads no better than the threshold where the fills cannot follow
 #: the sweep; such a NO-GO says nothing of the sweep. (A GO stays a GO: a loss lowers the coherence,
 #: never raises it.)
-LOSS_LINK_FRACTION = 1.0 - math.sqrt(MIN_COHERENCE)
+LOSS_LINK_FRACTION = DEFAULT_CRITERIA.loss_link_fraction
 
 
 def shows_up_to_rad_s(rate_hz: float) -> float:
@@ -320,6 +322,8 @@ class TestPointJudgement:
         What the autopilot was told to inject, when known.
     loss : DataLoss or None
         What the test point lost of its data over its span; None when not measured.
+    criteria : Criteria
+        The criteria that judged it.
     """
 
     __test__ = False                  # not a pytest class, whatever its name says
@@ -339,11 +343,13 @@ class TestPointJudgement:
     marginal: bool = False
     injection: SweepInjection | None = None
     loss: DataLoss | None = None
+    criteria: Criteria = DEFAULT_CRITERIA
 
     @property
     def link_bound(self) -> bool:
-        """A NO-GO on a loss of :data:`LOSS_LINK_FRACTION` or more: it says nothing of the sweep."""
-        return self.verdict == "NO-GO" and self.loss is not None and self.loss.fraction >= LOSS_LINK_FRACTION
+        """A NO-GO on a loss of the criteria's ``loss_link_fraction`` or more: it says nothing of the sweep."""
+        return (self.verdict == "NO-GO" and self.loss is not None
+                and self.loss.fraction >= self.criteria.loss_link_fraction)
 
     @property
     def label(self) -> str:
@@ -380,6 +386,7 @@ class TestPointJudgement:
             "missing": list(self.missing), "reasons": list(self.reasons),
             "resolvable_from_rad_s": round(self.resolvable_from_rad_s, 4),
             "loss_fraction": None if self.loss is None else round(self.loss.fraction, 4),
+            "criteria": self.criteria.to_dict(),
         }
 
 
@@ -416,7 +423,8 @@ def _gaps(bands, lo: float, hi: float) -> list[tuple[float, float]]:
     return [(a, b) for a, b in out if b > a * (1 + 1e-6)]
 
 
-def _describe_gap(pair: str, a: float, b: float, lo: float, hi: float, resolvable: float, duration_s: float) -> str:
+def _describe_gap(pair: str, a: float, b: float, lo: float, hi: float, resolvable: float, duration_s: float,
+                  criteria: Criteria = DEFAULT_CRITERIA) -> str:
     """One line an operator can act on, for an inadequate stretch [a, b] of the band [lo, hi]."""
     band = f"{a:.3g}-{b:.3g} rad/s"
     if a <= lo * (1 + 1e-6) and b <= math.sqrt(lo * hi):
@@ -427,7 +435,7 @@ def _describe_gap(pair: str, a: float, b: float, lo: float, hi: float, resolvabl
         return f"{pair} needs {band}: {what}"
     if b >= hi * (1 - 1e-6):
         return f"{pair} needs {band}: sweep up to {hi:.3g} rad/s (more amplitude at high frequency if it did)"
-    return f"{pair} needs {band}: coherence below {MIN_COHERENCE:g} there (more amplitude, or repeat the sweep)"
+    return f"{pair} needs {band}: coherence below {criteria.min_coherence:g} there (more amplitude, or repeat the sweep)"
 
 
 def _swept_bands(x: np.ndarray, sample_rate_hz: float, band_rad_s) -> tuple | None:
@@ -469,13 +477,14 @@ def _contiguous(bands) -> tuple[float, float] | None:
     return out
 
 
-def _pair(analysis, ref, o: str, swept: str, lo: float, hi: float, kind: str) -> PairJudgement:
+def _pair(analysis, ref, o: str, swept: str, lo: float, hi: float, kind: str,
+          criteria: Criteria = DEFAULT_CRITERIA) -> PairJudgement:
     rs = analysis.referenced if ref else analysis.siso
     r = rs.pair(o, swept)
     finite = np.isfinite(r.H) & np.isfinite(r.coherence) & np.isfinite(r.random_error)
     g = np.where(finite, r.coherence, 0.0)
     eps = np.where(finite, r.random_error, np.inf)
-    ok = finite & (g >= MIN_COHERENCE) & (eps <= MAX_RANDOM_ERROR)
+    ok = finite & criteria.adequate(g, eps)
     bands = _adequate_bands(r.omega, ok)
     frac = _log_fraction(bands, lo, hi)
     # the bracket: the coherence at -/+ its random error, with eps_r scaled as sqrt(1 - g) / sqrt(g)
@@ -486,8 +495,7 @@ def _pair(analysis, ref, o: str, swept: str, lo: float, hi: float, kind: str) ->
         for gg in (np.clip(g - sigma, 0.0, 1.0), np.clip(g + sigma, 0.0, 1.0)):
             e = np.where(shape > 0, eps * np.sqrt(np.clip(1.0 - gg, 0.0, None) / np.clip(gg, 1e-12, None)) / shape,
                          eps)
-            out.append(_log_fraction(_adequate_bands(r.omega, finite & (gg >= MIN_COHERENCE)
-                                                     & (e <= MAX_RANDOM_ERROR)), lo, hi))
+            out.append(_log_fraction(_adequate_bands(r.omega, finite & criteria.adequate(gg, e)), lo, hi))
     widest = max(bands, key=lambda b: math.log(b[1] / b[0]), default=None)
     med = float(np.median(r.coherence[finite])) if np.any(finite) else 0.0
     return PairJudgement(o, swept, frac, widest, bands, kind, med, (min(out[0], frac), max(out[1], frac)), r)
@@ -496,8 +504,9 @@ def _pair(analysis, ref, o: str, swept: str, lo: float, hi: float, kind: str) ->
 def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_input: str, outputs, band_rad_s, *,
                      valid: np.ndarray | None = None, references: dict | None = None,
                      injection: SweepInjection | None = None, elapsed_s: float | None = None, final: bool = True,
-                     required_fraction: float = REQUIRED_FRACTION, min_duration_s: float = 10.0,
-                     source_rates_hz: dict | None = None, loss: DataLoss | None = None) -> TestPointJudgement:
+                     required_fraction: float | None = None, min_duration_s: float = 10.0,
+                     source_rates_hz: dict | None = None, loss: DataLoss | None = None,
+                     criteria: Criteria = DEFAULT_CRITERIA) -> TestPointJudgement:
     """The verdict on a test point from its aligned samples.
 
     Parameters
@@ -524,20 +533,27 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
     final : bool
         True: the closing verdict, over the whole judged band. False: a running verdict, over the
         band swept so far.
-    required_fraction, min_duration_s : float
-        The GO criteria (see the module docstring).
+    required_fraction : float, optional
+        Fraction of the band a required pair must cover; default the criteria's.
+    min_duration_s : float
+        A test point shorter than this [s] is not analysed.
     source_rates_hz : dict of str -> float, optional
         The rate each signal arrives at [Hz]: a pair whose signals arrive too slowly to show the
         top of the band is told so.
     loss : DataLoss, optional
         What the test point lost of its data (:meth:`DataLoss.measure`): from
         :data:`LOSS_REASON_FRACTION` on the first reason (and the first thing a NO-GO needs), a
-        NO-GO from :data:`LOSS_LINK_FRACTION` on labelled "NO-GO (link)"; a smaller loss is said last.
+        NO-GO from :data:`LOSS_LINK_FRACTION` on labelled "NO-GO (link)"; a smaller loss is said last
+        (both follow ``criteria``).
+    criteria : Criteria
+        The adequacy and GO criteria (:class:`~livesweep.spectral.criteria.Criteria`); default the method's.
 
     Returns
     -------
     TestPointJudgement
     """
+    if required_fraction is None:
+        required_fraction = criteria.required_fraction
     values = np.atleast_2d(np.asarray(values, float))
     names = list(names)
     n = values.shape[1]
@@ -575,10 +591,10 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
     if not final:
         if swept is None or math.log10(swept[1] / max(swept[0], lo)) < _MIN_SWEPT_DECADES:
             why, needs = _with_loss([f"{swept_input}: nothing of {lo:.3g}-{hi:.3g} rad/s swept yet"],
-                                    ["nothing swept yet"], False, loss)
+                                    ["nothing swept yet"], False, loss, criteria)
             return TestPointJudgement(swept_input, "NO-GO", (), None, needs, why, duration,
                                       resolvable, final=False, band_rad_s=(lo, hi), swept_rad_s=None,
-                                      excitation=excitation, injection=injection, loss=loss)
+                                      excitation=excitation, injection=injection, loss=loss, criteria=criteria)
         j_hi = swept[1]
     band_text = f"{lo:.3g}-{j_hi:.3g} rad/s"
 
@@ -599,7 +615,7 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
                            f"(at least {min_duration_s:g} s, {LOW_FREQUENCY_PERIODS:g} periods at {lo:.3g} rad/s = "
                            f"{LOW_FREQUENCY_PERIODS * 2 * math.pi / lo:.0f} s)")
             continue
-        p = _pair(analysis, ref, o, swept_input, lo, j_hi, kind)
+        p = _pair(analysis, ref, o, swept_input, lo, j_hi, kind, criteria)
         pairs.append(p)
         ok = p.adequate_fraction >= required_fraction
         a, b = p.adequate_range
@@ -609,7 +625,7 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
                        f"{_pts(p.adequate_fraction, required_fraction)}; {100 * a:.0f}-{100 * b:.0f} % within the "
                        f"random error; {kind} coherence)")
         if not ok:
-            missing += [_describe_gap(pair, ga, gb, lo, j_hi, resolvable, duration)
+            missing += [_describe_gap(pair, ga, gb, lo, j_hi, resolvable, duration, criteria)
                         for ga, gb in _gaps(p.bands_rad_s, lo, j_hi)]
     failing = [p.output for p in pairs if p.adequate_fraction < required_fraction]
     for sig in dict.fromkeys([swept_input, *failing] if failing else []):   # each signal once
@@ -647,27 +663,28 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
         failing = [p for p in pairs if p.adequate_fraction < required_fraction]
         marginal = (duration >= min_duration_s and excited_ok and bool(failing)
                     and all(p.marginal(required_fraction) for p in failing))
-    reasons, missing = _with_loss(reasons, [] if go else missing, go, loss)
+    reasons, missing = _with_loss(reasons, [] if go else missing, go, loss, criteria)
     return TestPointJudgement(swept_input, "GO" if go else "NO-GO", tuple(pairs), excited,
                               missing, reasons, duration, resolvable, final=final,
                               band_rad_s=(lo, hi), swept_rad_s=swept, excitation=excitation, marginal=marginal,
-                              injection=injection, loss=loss)
+                              injection=injection, loss=loss, criteria=criteria)
 
 
-def _with_loss(reasons: list, missing: list, go: bool, loss: DataLoss | None) -> tuple[tuple, tuple]:
-    """The reasons and what a NO-GO needs, with the data's loss said: first from
-    :data:`LOSS_REASON_FRACTION` on (what the link counted right after it), else last."""
+def _with_loss(reasons: list, missing: list, go: bool, loss: DataLoss | None,
+               criteria: Criteria = DEFAULT_CRITERIA) -> tuple[tuple, tuple]:
+    """The reasons and what a NO-GO needs, with the data's loss said: first from the criteria's
+    ``loss_reason_fraction`` on (what the link counted right after it), else last."""
     if loss is None or not loss.missing:
         return tuple(reasons), tuple(missing)
     text, cause = loss.describe(), loss.cause()
-    if loss.fraction < LOSS_REASON_FRACTION:
+    if loss.fraction < criteria.loss_reason_fraction:
         said = [f"{text}: too little to move a coherence by more than its own random error (below "
-                f"{100 * LOSS_REASON_FRACTION:.1f} %)",
+                f"{100 * criteria.loss_reason_fraction:.1f} %)",
                 *([cause] if cause else [])]
         return (*reasons, *said), tuple(missing)
     if go:
         first = f"{text}: adequate all the same (a loss lowers the coherence, it never raises it)"
-    elif loss.fraction >= LOSS_LINK_FRACTION:
+    elif loss.fraction >= criteria.loss_link_fraction:
         first = f"{text}: the verdict reflects the link, not the sweep"
     else:
         first = (f"{text}: enough to lower a coherence by more than its random error; the NO-GO may be the "

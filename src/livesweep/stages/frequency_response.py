@@ -237,7 +237,7 @@ def run_frequency_response_stage(case: Case, *, parallel: bool = False) -> Frequ
     except ConfigError as e:
         raise ConfigError(f"{case.path}: spectral: {e}") from None
     best = analysis.best
-    adequacy = tuple(pair_adequacy(p) for p in best.pairs())
+    adequacy = tuple(pair_adequacy(p, case.criteria) for p in best.pairs())
     gaps = {n: {"samples_excluded": int(np.sum(~record.valid_of(n)))} for n in record.names}
     if refs:
         notes.append("responses formed through the exogenous references " + ", ".join(
@@ -260,7 +260,7 @@ def run_frequency_response_stage(case: Case, *, parallel: bool = False) -> Frequ
                      "there are unreliable (fly less correlated off-axis inputs)")
     for a in adequacy:
         if a.fraction < 0.2:
-            notes.append(f"{a.output}/{a.input}: adequate (gamma^2 >= 0.6, eps <= 0.2) over only {100 * a.fraction:.0f} % "
+            notes.append(f"{a.output}/{a.input}: adequate ({case.criteria.ascii()}) over only {100 * a.fraction:.0f} % "
                          "of the band")
     data_quality = {
         "records": [{"label": lab, "log": str(rec.log), "start_s": rec.start_s, "end_s": rec.end_s}

@@ -12,9 +12,10 @@ import numpy as np
 
 from livesweep.config import Case, require_table
 from livesweep.errors import ConfigError, check_band, quote
-from livesweep.ident.cost import MIN_COHERENCE, fit_points
+from livesweep.ident.cost import fit_points
 from livesweep.ident.transfer_function import (STRUCTURE_PREFIXES, TransferFunctionModel, fit_transfer_function,
                                                parse_structure)
+from livesweep.spectral.criteria import DEFAULT_CRITERIA
 from livesweep.spectral.response import FrequencyResponseSet
 
 __all__ = ["TransferFunctionSpec", "TransferFunctionStage", "transfer_function_specs", "run_transfer_function_stage",
@@ -46,7 +47,8 @@ def response_kind(output_units: str) -> str | None:
     return "rate" if u in RATE_UNITS else "attitude" if u in ATTITUDE_UNITS else None
 
 
-def handling_qualities(omega, H, *, coherence=None, output_units: str = "deg/s") -> dict | None:
+def handling_qualities(omega, H, *, coherence=None, output_units: str = "deg/s",
+                       min_coherence: float = DEFAULT_CRITERIA.min_coherence) -> dict | None:
     """Bandwidth, phase delay and omega_180 of an attitude response, for the report.
 
     A rate response (the usual sweep pair, e.g. p/da, output in deg/s or rad/s) is integrated to
@@ -54,7 +56,8 @@ def handling_qualities(omega, H, *, coherence=None, output_units: str = "deg/s")
     rad) is used as it is; any other output (an acceleration, a sideslip) has no such criteria
     and gives None. A negative control sense (the attitude response starting near +/-180 deg
     at the lowest coherent frequencies, i.e. the rate response near 180 deg) is flipped first.
-    Values are None where the crossing is not in the data.
+    Values are None where the crossing is not in the data; with ``coherence``, only points with
+    gamma^2 >= ``min_coherence`` (the case's criteria) are read.
     """
     from livesweep.ident.handling import bandwidth, phase_delay
     from livesweep.spectral.response import FrequencyResponse
@@ -65,7 +68,7 @@ def handling_qualities(omega, H, *, coherence=None, output_units: str = "deg/s")
     H = np.asarray(H, complex)
     w = np.asarray(omega, float)
     coh = np.ones(H.shape) if coherence is None else np.asarray(coherence, float)
-    ok = np.isfinite(H) & (coh >= MIN_COHERENCE)
+    ok = np.isfinite(H) & (coh >= min_coherence)
     if not ok.any():
         ok = np.isfinite(H)
     low = np.flatnonzero(ok)[: max(3, ok.sum() // 10)]
@@ -73,7 +76,7 @@ def handling_qualities(omega, H, *, coherence=None, output_units: str = "deg/s")
     sign = -1.0 if np.median(np.cos(np.angle(rate_like))) < 0 else 1.0
     resp = FrequencyResponse("y", "u", w, sign * H, coh, np.zeros(H.shape))
     integrate = kind == "rate"
-    mc = MIN_COHERENCE if coherence is not None else None
+    mc = min_coherence if coherence is not None else None
     bw = bandwidth(resp, "rate", integrate=integrate, min_coherence=mc)
     tau_p = phase_delay(resp, integrate=integrate, min_coherence=mc) if bw.omega_180 is not None else None
 
@@ -159,7 +162,8 @@ def run_transfer_function_stage(case: Case, frs: FrequencyResponseSet,
         if model.output not in frs.outputs or model.input not in frs.inputs:
             raise ConfigError(f"{case.path}: transfer_functions.{model.name}: pair {model.output}/{model.input} is not "
                               f"among the frequency responses (outputs {list(frs.outputs)}, inputs {list(frs.inputs)})")
-        pd = fit_points(frs.pair(model.output, model.input), band_rad_s=spec.band_rad_s)
+        pd = fit_points(frs.pair(model.output, model.input), band_rad_s=spec.band_rad_s,
+                        min_coherence=case.criteria.min_coherence)
         groups.setdefault(str(model.denominator), []).append((pd, model))
         pairs[model.name] = pd
     fits, notes = [], []
@@ -176,7 +180,8 @@ def run_transfer_function_stage(case: Case, frs: FrequencyResponseSet,
         if response_kind(units) is None:
             continue
         handling[f.name] = {"measured": handling_qualities(resp.omega, resp.H, coherence=resp.coherence,
-                                                           output_units=units),
+                                                           output_units=units,
+                                                           min_coherence=case.criteria.min_coherence),
                             "fitted": handling_qualities(resp.omega, f.response(resp.omega), output_units=units)}
     return TransferFunctionStage(tuple(fits), pairs, tuple(notes), handling)
 
@@ -207,7 +212,7 @@ def run_state_space_stage(case: Case, frs: FrequencyResponseSet, *, reduce: bool
         return None
     if model is None:
         model = StateSpaceModel.from_table(table, where=f"{case.path}: state_space")
-    pairs, skipped = select_pairs(frs, model)
+    pairs, skipped = select_pairs(frs, model, min_coherence=case.criteria.min_coherence)
     if not pairs:
         raise ConfigError(f"{case.path}: state_space: none of the model's pairs has usable coherence")
     notes = [f"pair {o}/{i} not fitted: {why}" for o, i, why in skipped]

@@ -127,5 +127,5 @@ def run_residual_stage(case: Case, frs: FrequencyResponseSet, ss, *, runner=None
     if not loop.added:
         return ResidualStage(loop, settings)
     after = tuple(runner(loop.fit.model, loop.fit.theta)) if runner is not None else ()
-    pairs, _ = select_pairs(frs, loop.fit.model)
+    pairs, _ = select_pairs(frs, loop.fit.model, min_coherence=case.criteria.min_coherence)
     return ResidualStage(loop, settings, after, evaluate_state_space(loop.fit, pairs))
