@@ -44,14 +44,15 @@ Nothing is dropped silently: every byte that does not become a frame is counted 
 Signing (MAVLink 2): with ``signing_key`` set, every signed frame is checked here, not by
 pymavlink's ``check_signature``: pymavlink stores a frame's signing time stamp as its stream's
 newest *before* it compares the signature, so one forged frame with time stamp 2**48-1 would make
-every later genuine frame of that stream look like a replay. This module compares the signature
-first (SHA-256 of key and frame, constant time) and only then checks and advances the stream's
-time stamp (a new stream may be at most one minute older than the newest time stamp seen, as in
-the MAVLink signing specification). pymavlink itself rejects unsigned frames *without counting
-them* when no ``allow_unsigned_callback`` is installed (docs/user-guide.md, MAVLink), so this
-module installs its own callback that counts them and answers ``allow_unsigned``. pymavlink also
-calls that callback for signed frames whose check failed; those are always refused here
-(``allow_unsigned`` never lets a forged signature through) and counted in ``bad_signature`` only.
+every later genuine frame of that stream look like a replay.
+:mod:`~livesweep.telemetry.mavlink_signing` compares the signature first (SHA-256 of key and frame,
+constant time) and only then checks and advances the stream's time stamp (a new stream may be at
+most one minute older than the newest time stamp seen, as in the MAVLink signing specification).
+pymavlink itself rejects unsigned frames *without counting them* when no
+``allow_unsigned_callback`` is installed (docs/user-guide.md, MAVLink), so the decoder installs its
+own callback that counts them and answers ``allow_unsigned``. pymavlink also calls that callback
+for signed frames whose check failed; those are always refused here (``allow_unsigned`` never lets
+a forged signature through) and counted in ``bad_signature`` only.
 Without a key, signatures are ignored and everything is accepted.
 
 Time: ``receive_ns`` comes from :func:`~livesweep.telemetry.clock.receive_ns` (UNIX time that
@@ -73,380 +74,57 @@ check time-stamp continuity (``vehicle_ns``) to detect loss.
 Files are never handed to ``mavutil.mavlink_connection``: it picks a reader from the file
 *name* (``*.bin`` -> DataFlash) and executes existing files whose path contains ``/bin/``.
 :class:`TlogSource` reads the bytes itself and feeds a bare pymavlink parser.
+
+Modules: this module holds the live source, :class:`MavlinkSource`, and is where the sources are
+imported from. The work is shared with
+
+* :mod:`~livesweep.telemetry.mavlink_decode`: :class:`MavlinkDecoder`, the parsers, checks and
+  counters every source applies to a frame;
+* :mod:`~livesweep.telemetry.mavlink_signing`: the MAVLink 2 signature and replay checks;
+* :mod:`~livesweep.telemetry.mavlink_tlog`: :class:`TlogSource`, the tlog replay;
+* :mod:`~livesweep.telemetry.mavlink_url`: :func:`parse_source_url`, the live urls accepted;
+* :mod:`~livesweep.telemetry.udp_drops`: the kernel's count of dropped datagrams.
 """
 
 from __future__ import annotations
 
 import collections
 import errno
-import hashlib
-import hmac
 import logging
-import math
-import mmap
-import os
-import re
 import select
 import socket
 import struct
-import sys
 import time
-from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
-from livesweep.errors import ConfigError, LivesweepError, LogFormatError
+from livesweep.errors import ConfigError, LivesweepError
 from livesweep.telemetry import mavlink_codec as codec
-from livesweep.telemetry.clock import UINT64_NS_MAX, StampCheck, receive_ns
+from livesweep.telemetry.clock import receive_ns
 from livesweep.telemetry.frames import Frame
-from livesweep.telemetry.mavlink_codec import _dialect, mavutil  # imported with MAVLINK20=1
-from livesweep.telemetry.mavlink_out import parse_url
+from livesweep.telemetry.mavlink_codec import mavutil  # imported with MAVLINK20=1
+from livesweep.telemetry.mavlink_decode import (_IFLAG_SIGNED, _MARKER_V1, _MARKER_V2, _SIG_LEN, MavlinkDecoder,
+                                                _empty_counts)
+from livesweep.telemetry.mavlink_signing import _SIGNING_EPOCH_S, _SIGNING_NEW_STREAM_UNITS, _check_key
+from livesweep.telemetry.mavlink_tlog import _PROBE_BYTES, _TS_MAX_US, _TS_MIN_US, _TS_WINDOW_US, TlogSource, _frame_len
+from livesweep.telemetry.mavlink_url import (_FILE_SUFFIXES, _NET_PREFIX_RE, _SHORT_URL_RE, _looks_like_file,
+                                             parse_source_url)
+from livesweep.telemetry.udp_drops import KERNEL_DROPS_KNOWN, SO_RXQ_OVFL, udp_kernel_drops
 
 __all__ = ["MavlinkSource", "TlogSource", "MavlinkDecoder", "udp_kernel_drops"]
 
 log = logging.getLogger(__name__)
 
-_MARKER_V1 = 0xFE
-_MARKER_V2 = 0xFD
-_SIG_LEN = _dialect.MAVLINK_SIGNATURE_BLOCK_LEN  # 13
-_IFLAG_SIGNED = _dialect.MAVLINK_IFLAG_SIGNED
-
-# tlog time stamps: plausible absolute range (2000-01-01 .. 2100-01-01, µs since the epoch)
-_TS_MIN_US = 946_684_800 * 1_000_000
-_TS_MAX_US = 4_102_444_800 * 1_000_000
-# a record time stamp more than this away from the previous one is taken for misalignment
-_TS_WINDOW_US = 24 * 3600 * 1_000_000
-# how far into a file the format check looks for the first MAVLink record
-_PROBE_BYTES = 64 * 1024
-# signing time stamps count 10 µs units since 2015-01-01
-_SIGNING_EPOCH_S = 1_420_070_400
-# a new signing stream may be this much older than the newest time stamp seen (1 min in 10 µs units)
-_SIGNING_NEW_STREAM_UNITS = 6_000_000
-#: Linux: the socket option that reports the kernel's drop count with every datagram.
-SO_RXQ_OVFL = 40
-#: Whether the kernel says how many datagrams it dropped (Linux).
-KERNEL_DROPS_KNOWN = sys.platform.startswith("linux")
 # tcpin: the most clients served at once (more are refused and counted)
 _MAX_TCP_CLIENTS = 16
 
-_SHORT_URL_RE = re.compile(r"^(udpin|udp|tcpin):(?::)?(\d{1,5})$")
-_NET_PREFIX_RE = re.compile(r"^(udpout|udpin|udp|tcp|tcpin):")
-_FILE_SUFFIXES = (".tlog", ".bin", ".log", ".mavlink", ".raw", ".px4log", ".ulg", ".mcap", ".elf")
-
-
-def _empty_counts() -> dict[str, Any]:
-    return {
-        "received": {},
-        "by_system": {},
-        "bad_crc": 0,
-        "bad_prefix_or_garbage": 0,
-        "rejected_unsigned": 0,
-        "unsigned_accepted": 0,
-        "bad_signature": 0,
-        "replayed_signature": 0,
-        "bad_other": 0,
-        "unknown_message": 0,
-        "seq_gaps": {},
-        "seq_repeats": 0,
-        "clock_unrepresentable": 0,
-        "clock_implausible": 0,
-        "kernel_drops": 0,
-        "bytes": 0,
-    }
-
-
-def _check_key(signing_key: Any) -> bytes | None:
-    if signing_key is None:
-        return None
-    if not isinstance(signing_key, (bytes, bytearray)) or len(signing_key) != 32:
-        n = len(signing_key) if hasattr(signing_key, "__len__") else "?"
-        raise ConfigError(
-            "MAVLink signing key must be 32 bytes (e.g. hashlib.sha256(passphrase).digest()), "
-            f"got {type(signing_key).__name__} of length {n}"
-        )
-    return bytes(signing_key)
-
-
-class MavlinkDecoder:
-    """Bare pymavlink parsers plus the checking, counting and Frame building shared by the sources
-    (and by the recorder process, :mod:`livesweep.telemetry.capture`)."""
-
-    def __init__(self, signing_key: bytes | None, allow_unsigned: bool, *, live: bool) -> None:
-        self.counts = _empty_counts()
-        self._key = signing_key
-        self._last_seq: dict[tuple[int, int], int] = {}
-        #: (sysid, compid) -> signed frames refused since that source's last good one: they arrived,
-        #: so the sequence numbers they used are no loss
-        self._refused_arrivals: dict[tuple[int, int], int] = {}
-        self._allow_unsigned = bool(allow_unsigned)
-        self._warned: set[str] = set()
-        self._stamp_clocks: dict[tuple[int, int, str], StampCheck] = {}
-        self._time_specs: dict[str, tuple[str, int, int | None] | None] = {}   # msgname -> (field, ns/unit, wrap ns)
-        # signing: newest time stamp per (link id, sysid, compid) and overall [10 µs since 2015].
-        # Live: like mavutil.setup_signing, a *new* stream must not be more than one minute older
-        # than now (rejects replays of old captures). A tlog is old by nature: 0.
-        self._sign_streams: dict[tuple[int, int, int], int] = {}
-        self._sign_time = int(max(time.time() - _SIGNING_EPOCH_S, 0) * 100_000) if live else 0
-        self._refused_signed = False
-        self.mav = self.parser()
-
-    def parser(self) -> Any:
-        """A new pymavlink parser (one per byte stream) that checks signatures through this decoder."""
-        mav = _dialect.MAVLink(None, srcSystem=0, srcComponent=0)
-        mav.robust_parsing = True  # BAD_DATA messages instead of MAVError exceptions
-        if self._key is not None:
-            s = mav.signing
-            s.secret_key = self._key
-            s.sign_outgoing = False
-            s.allow_unsigned_callback = self._unsigned_callback
-            mav.check_signature = self._check_signature   # pymavlink's own trusts the time stamp first
-        return mav
-
-    def _check_signature(self, msgbuf: bytearray, src_system: int, src_component: int) -> bool:
-        """The signature first, then the stream's time stamp (MAVLink 2 signing, replay protection)."""
-        key = self._key
-        assert key is not None
-        expected = hashlib.sha256(key + bytes(msgbuf[:-6])).digest()[:6]
-        arrived = self._refused_arrivals
-        if not hmac.compare_digest(expected, bytes(msgbuf[-6:])):
-            self._refuse_signed("bad_signature", "signed MAVLink frame with a wrong signature refused "
-                                "(forged, or signed with another key)")
-            arrived[(src_system, src_component)] = arrived.get((src_system, src_component), 0) + 1
-            return False
-        stamp = int.from_bytes(bytes(msgbuf[-12:-6]), "little")
-        stream = (msgbuf[-13], src_system, src_component)
-        last = self._sign_streams.get(stream)
-        if (stamp <= last) if last is not None else (stamp + _SIGNING_NEW_STREAM_UNITS < self._sign_time):
-            self.counts["replayed_signature"] += 1
-            self._refuse_signed("bad_signature", "signed MAVLink frame refused: its signing time stamp is not newer "
-                                "than its stream's (a replay)")
-            arrived[(src_system, src_component)] = arrived.get((src_system, src_component), 0) + 1
-            return False
-        self._sign_streams[stream] = stamp
-        self._sign_time = max(self._sign_time, stamp)
-        return True
-
-    def _refuse_signed(self, counter: str, text: str) -> None:
-        self.counts[counter] += 1
-        self._refused_signed = True
-        self._warn_once(counter, text + "; further ones are only counted")
-
-    # pymavlink calls this for unsigned frames AND for signed frames whose check failed
-    def _unsigned_callback(self, mav: Any, msgid: int) -> bool:
-        if self._refused_signed:
-            self._refused_signed = False
-            return False  # a bad signature is never accepted, not even with allow_unsigned
-        if self._allow_unsigned:
-            self.counts["unsigned_accepted"] += 1
-            return True
-        self.counts["rejected_unsigned"] += 1
-        self._warn_once("unsigned", "unsigned MAVLink frame rejected (signing key set); further ones are only counted")
-        return False
-
-    def _warn_once(self, key: str, text: str) -> None:
-        if key not in self._warned:
-            self._warned.add(key)
-            log.warning("%s", text)
-
-    def reset(self, mav: Any = None) -> int:
-        """Drop a partial frame left in a parser (end of a datagram); returns its length."""
-        mav = self.mav if mav is None else mav
-        left = len(mav.buf) - mav.buf_index
-        mav.buf = bytearray()
-        mav.buf_index = 0
-        mav.expected_length = _dialect.HEADER_LEN_V1 + 2
-        return left
-
-    def decode_frame(self, frame: bytes) -> Any:
-        """Decode one complete frame exactly as ``parse_char`` with ``robust_parsing`` would.
-
-        (What ``MAVLink.parse_char`` does for a whole frame, without its byte-buffer
-        bookkeeping, which costs about a quarter of the parse time.)
-        """
-        mav = self.mav
-        buf = bytearray(frame)
-        try:
-            if buf[0] == _MARKER_V2 and (buf[2] & ~_IFLAG_SIGNED) != 0:
-                raise _dialect.MAVError("invalid incompat_flags 0x%x 0x%x %u" % (buf[2], buf[0], len(buf)))
-            return mav.decode(buf)
-        except _dialect.MAVError as reason:
-            mav.total_receive_errors += 1
-            return _dialect.MAVLink_bad_data(buf, reason.message)
-
-    def pending_bytes(self, mav: Any = None) -> int:
-        mav = self.mav if mav is None else mav
-        return len(mav.buf) - mav.buf_index
-
-    def _vehicle_ns(self, rec: dict, mtype: str, receive_ns: int) -> int | None:
-        """The record's vehicle time [ns], or None when it has none or it cannot be trusted (counted)."""
-        spec = self._time_specs.get(mtype)
-        if spec is None:
-            tf = codec.vehicle_time_field(mtype)
-            wrap = None if tf is None else codec.stamp_wrap_units(mtype, tf[0])
-            spec = self._time_specs[mtype] = None if tf is None else (tf[0], tf[1], None if wrap is None else wrap * tf[1])
-        if spec is None:
-            return None
-        field, ns_per_unit, wrap_ns = spec
-        raw = rec[field]
-        vns = raw * ns_per_unit
-        if not 0 <= vns <= UINT64_NS_MAX:
-            self.counts["clock_unrepresentable"] += 1
-            self._warn_once("clock_unrepresentable", f"MAVLink {mtype} from {rec['sysid']}/{rec['compid']}: {field} "
-                            f"{raw} does not fit a log time in ns; recorded with its receive time (further ones are "
-                            "only counted)")
-            return None
-        key = (rec["sysid"], rec["compid"], mtype)       # one clock per stream: a field's meaning varies by message
-        check = self._stamp_clocks.get(key)
-        if check is None:
-            check = self._stamp_clocks[key] = StampCheck(wrap_ns=wrap_ns)
-        if not check.check(vns, receive_ns):
-            self.counts["clock_implausible"] += 1
-            self._warn_once("clock_implausible", f"MAVLink {mtype} from {rec['sysid']}/{rec['compid']}: {field} "
-                            f"{raw} does not follow the stream's clock; recorded with its receive time (further ones "
-                            "are only counted)")
-            return None
-        return vns
-
-    def handle(self, msg: Any, receive_ns: int, out: list[Frame] | collections.deque) -> None:
-        """Count ``msg`` and append its Frame to ``out`` when it is a good message."""
-        c = self.counts
-        mtype = msg.get_type()
-        if mtype == "BAD_DATA":
-            reason = str(getattr(msg, "reason", ""))
-            if reason.startswith("invalid MAVLink CRC"):
-                c["bad_crc"] += 1
-            elif reason.startswith("Bad prefix"):
-                c["bad_prefix_or_garbage"] += 1
-            elif reason.startswith("Invalid signature"):
-                pass  # counted by the callback (rejected_unsigned) or in bad_signature
-            else:
-                c["bad_other"] += 1
-                self._warn_once("bad_other", f"MAVLink BAD_DATA: {reason} (further BAD_DATA are only counted)")
-            return
-        if mtype.startswith("UNKNOWN_") or msg.get_msgId() < 0:
-            c["unknown_message"] += 1
-            return
-        try:
-            rec = codec.record_from_message(msg)
-            vns = self._vehicle_ns(rec, mtype, receive_ns)
-        except LivesweepError as e:  # a message outside the codec's dialect
-            c["unknown_message"] += 1
-            self._warn_once("conversion", f"MAVLink {mtype}: not converted ({e}); further such messages are only counted")
-            return
-        sysid, compid = rec["sysid"], rec["compid"]
-        # sequence gaps per (sysid, compid); 8-bit wrap, multiples of 256 invisible
-        key = (sysid, compid)
-        seq = msg.get_seq()
-        last = self._last_seq.get(key)
-        refused = self._refused_arrivals.pop(key, 0) if self._refused_arrivals else 0
-        if last is not None:
-            gap = (seq - last - 1) & 0xFF
-            if gap == 255:
-                c["seq_repeats"] += 1
-            elif gap > refused:
-                gap -= refused
-                k = f"{sysid}/{compid}"
-                c["seq_gaps"][k] = c["seq_gaps"].get(k, 0) + gap
-        self._last_seq[key] = seq
-        rcv = c["received"]
-        rcv[mtype] = rcv.get(mtype, 0) + 1
-        bs = c["by_system"]
-        bs[sysid] = bs.get(sysid, 0) + 1
-        out.append(Frame(f"/mavlink/{mtype}", receive_ns, vns, rec))
-
-    def snapshot(self) -> dict[str, Any]:
-        return {k: (dict(v) if isinstance(v, dict) else v) for k, v in self.counts.items()}
-
-    def datagram(self, data: bytes, receive_ns: int, out: list[Frame] | collections.deque) -> None:
-        """Decode one UDP datagram into ``out``: each frame it holds counted and checked; a frame cut
-        at its end is counted (``bad_prefix_or_garbage``) and dropped, so it cannot eat the next
-        datagram's frames."""
-        self.counts["bytes"] += len(data)
-        for m in self.mav.parse_buffer(data) or ():
-            self.handle(m, receive_ns, out)
-        if self.pending_bytes():
-            self.reset()
-            self.counts["bad_prefix_or_garbage"] += 1
-
-
-# ======================================================================================
-# Live source
-# ======================================================================================
-
-
-def udp_kernel_drops(sock: socket.socket) -> int | None:
-    """The datagrams the kernel dropped for a full receive buffer of ``sock``, from ``/proc/net/udp``
-    (Linux; None elsewhere or when it cannot be read). The count the kernel stamps on each datagram
-    (``SO_RXQ_OVFL``) only arrives with the next one: this also counts drops at the end of a burst."""
-    if not KERNEL_DROPS_KNOWN:
-        return None
-    try:
-        inode = str(os.fstat(sock.fileno()).st_ino)
-    except (OSError, ValueError):
-        return None
-    for table in ("/proc/net/udp", "/proc/net/udp6"):
-        try:
-            with open(table) as f:
-                next(f)
-                for line in f:
-                    cols = line.split()
-                    if len(cols) >= 13 and cols[9] == inode:
-                        return int(cols[12])
-        except (OSError, ValueError, StopIteration):
-            continue
-    return None
-
-
-def _looks_like_file(url: str) -> bool:
-    if url.startswith("/dev/") or _NET_PREFIX_RE.match(url) or "://" in url:
-        return False
-    return (
-        os.sep in url
-        or "/" in url
-        or url.lower().endswith(_FILE_SUFFIXES)
-        or os.path.exists(url)
-    )
-
-
-def parse_source_url(url: str) -> dict[str, Any]:
-    """Validate a live MAVLink input url; returns ``{"kind", "host", "port"}`` or serial info.
-
-    Accepted: ``udpin:HOST:PORT`` (``udp:`` is the same), ``tcp:HOST:PORT`` (connect to a
-    server such as SITL), ``tcpin:HOST:PORT`` (listen for one client), a serial device
-    (``/dev/tty*[,BAUD]``, ``COMn[,BAUD]``). ``udpin:PORT`` / ``udpin::PORT`` (and ``tcpin:``)
-    bind 127.0.0.1; any other host must be written out (``udpin:0.0.0.0:14550`` listens on
-    all interfaces, deliberately). Port 0 on ``udpin``/``tcpin`` picks a free port. File paths
-    raise :class:`ConfigError` pointing to :class:`TlogSource`; ``udpout`` is refused (a
-    monitor receives). Validation is :func:`~livesweep.telemetry.mavlink_out.parse_url`'s.
-    """
-    if not isinstance(url, str):
-        raise ConfigError(f"MAVLink input url {url!r} is not a string")
-    m = _SHORT_URL_RE.match(url)
-    if m:
-        url = f"{m.group(1)}:127.0.0.1:{m.group(2)}"
-    if _looks_like_file(url):
-        raise ConfigError(
-            f"MAVLink input url {url!r} is a file path, not a live link: read .tlog files with "
-            "livesweep.telemetry.mavlink_in.TlogSource(path) (never via pymavlink's "
-            "mavlink_connection, which picks a reader by file name and executes paths containing /bin/)"
-        )
-    probe = url
-    zero_port = False
-    nm = re.match(r"^(udpin|udp|tcpin):(.*):0+$", url)
-    if nm:  # parse_url wants 1..65535; port 0 = "any free port" is fine for a listener
-        zero_port = True
-        probe = f"{nm.group(1)}:{nm.group(2)}:1"
-    try:
-        t = parse_url(probe)
-    except ConfigError as e:
-        raise ConfigError(str(e).replace("MAVLink output url", "MAVLink input url").replace(repr(probe), repr(url))) from None
-    if t["kind"] == "udpout":
-        raise ConfigError(
-            f"MAVLink input url {url!r}: udpout sends; a monitor receives. Use udpin:HOST:PORT "
-            "(e.g. udpin:127.0.0.1:14550) and point the vehicle's output at it"
-        )
-    if zero_port:
-        t["port"] = 0
-    return t
+#: Names defined in the modules above that are also importable from here.
+_MOVED = (
+    _MARKER_V1, _MARKER_V2, _SIG_LEN, _IFLAG_SIGNED, _empty_counts,
+    _SIGNING_EPOCH_S, _SIGNING_NEW_STREAM_UNITS,
+    _TS_MIN_US, _TS_MAX_US, _TS_WINDOW_US, _PROBE_BYTES, _frame_len,
+    _SHORT_URL_RE, _NET_PREFIX_RE, _FILE_SUFFIXES, _looks_like_file, parse_source_url,
+    SO_RXQ_OVFL,
+)
 
 
 class MavlinkSource:
@@ -753,331 +431,3 @@ class MavlinkSource:
     def __repr__(self) -> str:
         return f"MavlinkSource({self.url!r}, received={sum(self._dec.counts['received'].values())})"
 
-
-# ======================================================================================
-# tlog replay
-# ======================================================================================
-
-
-def _frame_len(d: Any, i: int, n: int) -> int | None:
-    """Length of the MAVLink frame whose magic byte is at ``d[i]``; None if the header is cut."""
-    marker = d[i]
-    if marker == _MARKER_V1:
-        if i + 2 > n:
-            return None
-        return d[i + 1] + 8
-    if i + 3 > n:
-        return None
-    ln = d[i + 1] + 12
-    if d[i + 2] & _IFLAG_SIGNED:
-        ln += _SIG_LEN
-    return ln
-
-
-class TlogSource:
-    """Frames from a ``.tlog`` file: ``[uint64 big-endian µs time][raw MAVLink frame]`` repeated.
-
-    Parameters
-    ----------
-    path : str or Path
-        The file. It is opened by *content*: the first 8 bytes must be a plausible UNIX time
-        in µs (2000..2100) and a record ``[time][0xFD|0xFE ...]`` must follow within the
-        first 64 KiB, else :class:`LogFormatError` naming the file. (Strictly the first
-        record should be a MAVLink frame, but real logs such as ArduPilot's autotest tlog
-        start with non-MAVLink records: console text logged one byte per record.)
-    speed : float
-        0 or inf: as fast as possible (each :meth:`poll` returns up to ``max_frames``).
-        Otherwise frames are released when ``(t_record - t_first) / speed`` of wall time has
-        passed since the first poll.
-    signing_key : bytes, optional
-        Verify MAVLink 2 signatures (unsigned frames are then rejected and counted).
-
-    ``receive_ns`` of each frame is the record's time stamp (µs -> ns). Records are decoded
-    one at a time with a fresh parser state, so a bad record never swallows the next one.
-    A time stamp that is implausible (not within a day of the previous one) means the
-    reader lost alignment (a corrupted length, or a non-MAVLink record of unknown length):
-    it scans forward byte by byte to the next plausible time stamp and counts what it
-    skipped (``bad_prefix_or_garbage`` once per skipped run, ``garbage_bytes``). A cut last
-    record is counted in ``truncated_tail`` with one warning. Extra counters:
-    ``records`` (tlog records with a MAVLink frame), ``garbage_bytes``, ``truncated_tail``.
-    """
-
-    #: A file: the monitor reads it at its own pace and never sheds analysis load.
-    live = False
-
-    def __init__(self, path: str | os.PathLike, *, speed: float = 0, signing_key: bytes | None = None) -> None:
-        self.path = Path(path)
-        try:
-            s = float(speed)
-        except (TypeError, ValueError):
-            raise ConfigError(f"tlog replay speed {speed!r} is not a number") from None
-        if math.isnan(s) or s < 0:
-            raise ConfigError(f"tlog replay speed {speed!r} must be > 0 (or 0/inf for as fast as possible)")
-        self.speed = s
-        self._paced = s != 0 and not math.isinf(s)
-        key = _check_key(signing_key)
-        self._dec = MavlinkDecoder(key, False, live=False)
-        self._dec.counts.update({"records": 0, "garbage_bytes": 0, "truncated_tail": 0})
-        self._pending: collections.deque[Frame] = collections.deque()
-        self._closed = False
-        self._pos = 0
-        self._last_ts: int | None = None
-        self._resync_from: int | None = None  # after a bad frame: rescan from its marker + 1
-        self._done = False
-        self._t0_wall: float | None = None
-        self._t0_ns: int | None = None
-
-        try:
-            f = open(self.path, "rb")
-        except OSError as e:
-            raise LogFormatError(f"tlog {str(self.path)!r} cannot be opened: {e.strerror or e}") from None
-        self._f = f
-        try:
-            size = os.fstat(f.fileno()).st_size
-            if size == 0:
-                raise LogFormatError(f"{str(self.path)!r} is empty, not a MAVLink tlog")
-            self._map: Any = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
-            self._n = len(self._map)
-            self._check_format()
-            self._iter = self._records()
-        except BaseException:
-            self._release()
-            raise
-
-    # ------------------------------------------------------------------ format
-    def _check_format(self) -> None:
-        d, n = self._map, self._n
-        name = str(self.path)
-        if n < 8 + 8:
-            raise LogFormatError(f"{name!r} is too short ({n} bytes) to be a MAVLink tlog")
-        (ts0,) = struct.unpack_from(">Q", d, 0)
-        if not _TS_MIN_US <= ts0 <= _TS_MAX_US:
-            raise LogFormatError(
-                f"{name!r} is not a MAVLink tlog: its first 8 bytes are not a plausible big-endian "
-                f"µs UNIX time (got {bytes(d[:8]).hex()}); a tlog is [uint64 BE µs][MAVLink frame] repeated"
-            )
-        lim = min(n - 9, _PROBE_BYTES)
-        for q in range(0, lim + 1):
-            if d[q + 8] in (_MARKER_V1, _MARKER_V2):
-                (ts,) = struct.unpack_from(">Q", d, q)
-                if abs(ts - ts0) <= _TS_WINDOW_US:
-                    return
-        raise LogFormatError(
-            f"{name!r} is not a MAVLink tlog: no [µs time][0xFD/0xFE frame] record in its first "
-            f"{lim + 9} bytes"
-        )
-
-    # ------------------------------------------------------------------ decoding
-    def _plausible(self, ts: int) -> bool:
-        last = self._last_ts
-        if last is None:
-            return _TS_MIN_US <= ts <= _TS_MAX_US
-        return abs(ts - last) <= _TS_WINDOW_US
-
-    def _resync(self, start: int) -> int:
-        """First offset >= start where a plausible record begins (or the end of the data)."""
-        d, n = self._map, self._n
-        q = start
-        unpack = struct.unpack_from
-        while q + 8 <= n:
-            (ts,) = unpack(">Q", d, q)
-            if self._plausible(ts):
-                return q
-            # a session appended after a long break: absolute-plausible time, a frame start,
-            # and the record after that frame close in time
-            if _TS_MIN_US <= ts <= _TS_MAX_US and q + 8 < n and d[q + 8] in (_MARKER_V1, _MARKER_V2):
-                ln = _frame_len(d, q + 8, n)
-                if ln is not None:
-                    nxt = q + 8 + ln
-                    if nxt >= n or (nxt + 8 <= n and abs(unpack(">Q", d, nxt)[0] - ts) <= _TS_WINDOW_US):
-                        self._last_ts = ts
-                        return q
-            q += 1
-        return n
-
-    def _skip(self, frm: int, to: int) -> None:
-        c = self._dec.counts
-        c["bad_prefix_or_garbage"] += 1
-        c["garbage_bytes"] += to - frm
-        self._dec._warn_once("tlog-garbage", f"tlog {str(self.path)!r}: skipped non-MAVLink bytes at offset {frm} "
-                                             "(further skips are only counted)")
-
-    def _truncated(self, at: int) -> None:
-        c = self._dec.counts
-        c["truncated_tail"] += 1
-        c["garbage_bytes"] += self._n - at
-        log.warning("tlog %r: last record is cut (%d bytes at offset %d ignored)", str(self.path), self._n - at, at)
-
-    def _records(self) -> Iterator[tuple[int, bytes, Any]]:
-        """Each MAVLink frame record from the start: ``(time [µs], frame bytes, decoded message)``.
-
-        The one place that frames the file: it keeps the record alignment through non-MAVLink
-        records, garbage, corrupt lengths (after a frame whose CRC fails it rescans from that
-        frame's second byte) and a cut last record, counting what it skips.
-        """
-        d, n = self._map, self._n
-        dec = self._dec
-        counts = dec.counts
-        unpack = struct.unpack_from
-        p = self._pos
-        while p < n:
-            if p + 8 > n:
-                self._truncated(p)
-                p = n
-                continue
-            (ts,) = unpack(">Q", d, p)
-            if not self._plausible(ts):
-                start = self._resync_from if self._resync_from is not None else p + 1
-                self._resync_from = None
-                q = self._resync(max(start, 1))
-                self._skip(start if start < p else p, q)
-                p = q
-                continue
-            self._resync_from = None
-            i = p + 8
-            if i >= n:
-                self._truncated(p)
-                p = n
-                continue
-            marker = d[i]
-            if marker != _MARKER_V1 and marker != _MARKER_V2:
-                # a record that is not a MAVLink frame (its length is unknown)
-                self._last_ts = ts
-                q = self._resync(i + 1)
-                self._skip(i, q)
-                p = q
-                continue
-            ln = _frame_len(d, i, n)
-            if ln is None or i + ln > n:
-                q = self._resync(i + 1)
-                if q < n:  # a record follows: this frame's length byte is corrupt
-                    self._skip(i, q)
-                    p = q
-                    continue
-                self._truncated(p)
-                p = n
-                continue
-            frame = d[i : i + ln]
-            counts["bytes"] += ln
-            counts["records"] += 1
-            self._last_ts = ts
-            msg = dec.decode_frame(frame)
-            if msg.get_type() == "BAD_DATA" and str(getattr(msg, "reason", "")).startswith("invalid MAVLink CRC"):
-                self._resync_from = i + 1  # the length byte itself may be what is corrupted
-            p = self._pos = i + ln
-            yield ts, frame, msg
-        self._pos = p
-
-    def _decode(self, limit: int) -> None:
-        """Decode records into the pending queue until ``limit`` frames are pending or the end."""
-        handle = self._dec.handle
-        pend = self._pending
-        records = self._iter
-        while len(pend) < limit:
-            rec = next(records, None)
-            if rec is None:
-                self._done = True
-                break
-            ts, _frame, msg = rec
-            handle(msg, ts * 1000, pend)
-
-    def raw_records(self) -> Iterator[tuple[int, bytes, Any]]:
-        """The file's MAVLink frames as recorded, to send them on byte for byte (instead of :meth:`poll`).
-
-        Yields
-        ------
-        time_us : int
-            The record's time stamp [µs since the UNIX epoch] (when the ground station got it).
-        frame : bytes
-            The frame exactly as in the file (MAVLink 1 or 2, signature included).
-        msg : pymavlink message
-            pymavlink's decoding of it: ``BAD_DATA`` for a frame whose CRC fails or that cannot be
-            decoded (and, with ``signing_key``, one whose signature is refused); ``UNKNOWN_<id>``
-            for an id outside the dialect.
-
-        The records and their order are :meth:`poll`'s (the same framing and resynchronisation);
-        :attr:`counts` then holds ``records``, ``bytes`` and what was skipped, not the messages per
-        type (those come from :meth:`poll`'s frames). :meth:`poll` and this share the read position.
-        """
-        while not self._closed:
-            rec = next(self._iter, None)
-            if rec is None:
-                self._done = True
-                return
-            yield rec
-
-    # ------------------------------------------------------------------ Source API
-    @property
-    def counts(self) -> dict:
-        return self._dec.snapshot()
-
-    @property
-    def finished(self) -> bool:
-        return self._closed or (self._done and not self._pending)
-
-    def poll(self, timeout_s: float = 0.05, max_frames: int = 10_000) -> list[Frame]:
-        """The next frames: up to ``max_frames`` (unpaced), or those due by now (paced)."""
-        if self._closed:
-            raise LivesweepError(f"tlog {str(self.path)!r} is closed")
-        out: list[Frame] = []
-        if max_frames <= 0:
-            return out
-        if not self._paced:
-            if len(self._pending) < max_frames and not self._done:
-                self._decode(max_frames)
-            pend = self._pending
-            while pend and len(out) < max_frames:
-                out.append(pend.popleft())
-            return out
-        deadline = time.monotonic() + max(float(timeout_s or 0.0), 0.0)
-        pend = self._pending
-        while True:
-            if not pend and not self._done:
-                self._decode(min(max_frames, 1024))
-            if not pend:
-                return out  # end of the log
-            now = time.monotonic()
-            if self._t0_wall is None:  # the first poll starts the replay clock
-                self._t0_wall, self._t0_ns = now, pend[0].receive_ns
-            while pend and len(out) < max_frames and self._due(pend[0]) <= now:
-                out.append(pend.popleft())
-                if not pend and not self._done:
-                    self._decode(min(max_frames, 1024))
-            if out or not pend:
-                return out
-            # nothing due yet: sleep until the next frame is due, at most until the deadline
-            if now >= deadline:
-                return out
-            time.sleep(max(min(self._due(pend[0]), deadline) - now, 0.0))
-
-    def _due(self, frame: Frame) -> float:
-        """Wall time (monotonic) at which a paced replay releases ``frame``."""
-        return self._t0_wall + (frame.receive_ns - self._t0_ns) / 1e9 / self.speed
-
-    def _release(self) -> None:
-        m = getattr(self, "_map", None)
-        if m is not None:
-            try:
-                m.close()
-            except (BufferError, ValueError):  # pragma: no cover
-                pass
-            self._map = None
-        f = getattr(self, "_f", None)
-        if f is not None:
-            f.close()
-
-    def close(self) -> None:
-        """Release the file (idempotent)."""
-        if not self._closed:
-            self._closed = True
-            self._pending.clear()
-            self._release()
-
-    def __enter__(self) -> "TlogSource":
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
-
-    def __repr__(self) -> str:
-        return f"TlogSource({str(self.path)!r}, speed={self.speed})"

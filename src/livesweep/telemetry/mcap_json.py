@@ -1,6 +1,6 @@
 """Message bytes as JSON objects, how a message is named in an error, and what a lenient read skipped.
 
-:func:`_json_object` decodes one message or raises :class:`_BadMessage` with a reason (a key of
+:func:`json_object` decodes one message or raises :class:`BadMessage` with a reason (a key of
 :data:`SKIP_REASONS`); :class:`SkippedMessages` counts those a lenient read (``iter_file_order(...,
 skipped=...)``) steps over. Part of :mod:`livesweep.telemetry.mcap_log` (the facade: import from there).
 """
@@ -55,7 +55,7 @@ class SkippedMessages:
             self.examples.append(text)
 
 
-class _BadMessage(Exception):
+class BadMessage(Exception):
     """A message that is not a JSON object; ``reason`` is a key of SKIP_REASONS."""
 
     def __init__(self, reason: str, text: str) -> None:
@@ -63,20 +63,28 @@ class _BadMessage(Exception):
         self.reason = reason
 
 
+#: The name the MCAP modules use for :class:`BadMessage`.
+_BadMessage = BadMessage
+
+
 _JSON_KINDS = {list: "array", str: "string", int: "number", float: "number", bool: "boolean", type(None): "null"}
 
 
-def _json_object(data: bytes) -> dict:
-    """One message's JSON object; _BadMessage saying what it is instead."""
+def json_object(data: bytes) -> dict:
+    """One message's JSON object; BadMessage saying what it is instead."""
     try:
         obj = json.loads(data)
     except RecursionError:
-        raise _BadMessage("too_deep", "is nested too deeply to decode") from None
+        raise BadMessage("too_deep", "is nested too deeply to decode") from None
     except ValueError as e:        # JSONDecodeError, UnicodeDecodeError, an integer over 4300 digits
-        raise _BadMessage("not_json", f"is not valid JSON: {e}") from None
+        raise BadMessage("not_json", f"is not valid JSON: {e}") from None
     if not isinstance(obj, dict):
-        raise _BadMessage("not_an_object", f"is a JSON {_JSON_KINDS.get(type(obj), 'value')}, not an object")
+        raise BadMessage("not_an_object", f"is a JSON {_JSON_KINDS.get(type(obj), 'value')}, not an object")
     return obj
+
+
+#: The name the MCAP modules use for :func:`json_object`.
+_json_object = json_object
 
 
 def _at(path, topic: str, index: int, log_time: int) -> str:

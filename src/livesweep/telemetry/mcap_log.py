@@ -105,9 +105,8 @@ __all__ = [
     "get_field",
 ]
 
-#: The private names this module held before it was split, still importable from here
-#: (livesweep.inspection uses _open, _walk, _json_object, _BadMessage; mcap_recover _MAGIC and
-#: _MAX_CHUNK_BYTES; tests _decompress and _DECODE_BATCH).
+#: Private names still importable from here for the modules and tests that read them
+#: (mcap_recover _MAGIC and _MAX_CHUNK_BYTES; tests _decompress and _DECODE_BATCH).
 _PRIVATE = (
     _MAGIC, _UINT64_MAX, _check_time_ns, _crc_text, _crc_error_text,
     _MAX_SKIP_EXAMPLES, _BadMessage, _JSON_KINDS, _json_object, _at,

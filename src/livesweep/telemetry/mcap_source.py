@@ -1,8 +1,9 @@
 """Opening an MCAP log: check it is one, then read a finished file through its summary section (and indexes)
 or stream the records of an unfinished one up to its torn tail.
 
-:func:`_open` returns a :class:`_Source`: ``summary`` set for a finished file that ``mcap.reader.make_reader``
-reads, else ``scan`` (every schema, channel, message, metadata and attachment record a linear pass found).
+:func:`open_source` returns a :class:`_Source`: ``summary`` set for a finished file that
+``mcap.reader.make_reader`` reads, else ``scan`` (every schema, channel, message, metadata and attachment
+record a linear pass found).
 Part of :mod:`livesweep.telemetry.mcap_log` (the facade: import from there).
 """
 
@@ -121,7 +122,7 @@ def _check_file(p: Path) -> bool:
     return tail == _MAGIC
 
 
-def _open(path: str | os.PathLike[str]) -> _Source:
+def open_source(path: str | os.PathLike[str]) -> _Source:
     """Check ``path`` is an MCAP file and decide how to read it."""
     p = Path(path)
     if _check_file(p):
@@ -135,6 +136,10 @@ def _open(path: str | os.PathLike[str]) -> _Source:
     # unfinished (no footer), or finished without a summary section: stream the records
     scan = _scan(p)
     return _Source(p, scan.saw_footer, None, scan)
+
+
+#: The name the MCAP modules use for :func:`open_source`.
+_open = open_source
 
 
 def _topic_list(topics: str | Iterable[str] | None) -> list[str] | None:

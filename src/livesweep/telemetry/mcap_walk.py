@@ -1,6 +1,6 @@
 """The message walk: (channel id, log time, publish time, bytes) of some channels in file order.
 
-:func:`_walk` takes the hand-written chunk walk (:func:`_fast_message_walk`: struct over each
+:func:`walk_messages` takes the hand-written chunk walk (:func:`_fast_message_walk`: struct over each
 decompressed chunk, CRCs checked, a damaged chunk an error naming its byte offset and log-time range,
 or skipped and counted) for a finished file, and falls back to :func:`_reference_walk` (the linear
 scan of an unfinished file, or mcap's reader) when that walk declines a file.
@@ -42,8 +42,8 @@ def _reference_walk(src: _Source, chans: Mapping[int, Channel]) -> Iterator[tupl
         raise LogFormatError(f"cannot read messages from MCAP log {src.path}: {type(e).__name__}: {e}") from e
 
 
-def _walk(src: _Source, chans: Mapping[int, Channel],
-          skipped: SkippedMessages | None = None) -> Iterable[tuple[int, int, int, bytes]]:
+def walk_messages(src: _Source, chans: Mapping[int, Channel],
+                  skipped: SkippedMessages | None = None) -> Iterable[tuple[int, int, int, bytes]]:
     """(channel_id, log_time, publish_time, data) of ``chans`` in file order: the fast walk for a
     finished file, else (or when it declines the file) :func:`_reference_walk`."""
     if src.summary is not None:
@@ -56,6 +56,10 @@ def _walk(src: _Source, chans: Mapping[int, Channel],
         if walked is not None:
             return walked
     return _reference_walk(src, chans)
+
+
+#: The name the MCAP modules use for :func:`walk_messages`.
+_walk = walk_messages
 
 
 # --- fast message walk ------------------------------------------------------------------------
