@@ -3,7 +3,7 @@
 Each key of a TOML table is one field here, declared once with its type, units, default, range
 and meaning (:func:`livesweep.settings_schema.setting`); :mod:`livesweep.config` reads the files
 into these objects, and docs/case-file.md's reference tables are generated from them
-(``python -m livesweep.settings_schema``). Stages, the monitor and the report receive these
+(``python -m livesweep.settings``). Stages, the monitor and the report receive these
 objects; the adequacy and GO criteria are :class:`~livesweep.spectral.criteria.Criteria`
 (``[criteria]``).
 
@@ -18,11 +18,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from livesweep import limits
-from livesweep.settings_schema import Check, choices, integer, number, numbers, setting, string
+from livesweep.settings_schema import Check, choices, integer, number, numbers, setting, string, write_docs
 from livesweep.spectral.criteria import DEFAULT_CRITERIA, Criteria
 
 __all__ = ["SignalSpec", "RecordSpec", "SpectralSettings", "TestPointSettings", "ChannelMap", "Case", "Criteria",
-           "TEST_POINT_SOURCES"]
+           "TEST_POINT_SOURCES", "DOCUMENTED_TABLES", "regenerate_docs"]
 
 #: Where test points may come from (:mod:`livesweep.monitor.testpoints`).
 TEST_POINT_SOURCES = ("autopilot", "marker", "sweep")
@@ -271,3 +271,22 @@ class Case:
     spectral: SpectralSettings | None = setting(None, key=False)
     tables: dict = setting(factory=dict, key=False)
     criteria: Criteria = setting(DEFAULT_CRITERIA, key=False)
+
+
+#: The tables docs/case-file.md documents from their fields, by the name its markers use
+#: (``<!-- settings: spectral -->``).
+DOCUMENTED_TABLES = {"case": Case, "record": RecordSpec, "spectral": SpectralSettings, "criteria": Criteria,
+                     "test_points": TestPointSettings}
+
+
+def regenerate_docs(text: str) -> str:
+    """docs/case-file.md's ``text`` with its settings tables written from :data:`DOCUMENTED_TABLES`."""
+    return write_docs(text, DOCUMENTED_TABLES)
+
+
+if __name__ == "__main__":                     # python -m livesweep.settings [docs/case-file.md]
+    import sys
+
+    page = Path(sys.argv[1] if len(sys.argv) > 1 else Path(__file__).resolve().parents[2] / "docs" / "case-file.md")
+    page.write_text(regenerate_docs(page.read_text(encoding="utf-8")), encoding="utf-8")
+    print(f"{page}: settings tables regenerated")

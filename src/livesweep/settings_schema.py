@@ -20,7 +20,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import MISSING, dataclass
 from typing import Any
 
@@ -309,30 +309,11 @@ def markdown_table(cls) -> str:
 _BLOCK = re.compile(r"(<!-- settings: (?P<name>[\w.]+) -->\n)(?P<body>.*?)(<!-- end settings -->)", re.S)
 
 
-def generated_tables() -> dict[str, type]:
-    """The settings dataclasses docs/case-file.md documents, by the name its markers use."""
-    from livesweep import settings
-    from livesweep.spectral.criteria import Criteria
-
-    return {"case": settings.Case, "record": settings.RecordSpec, "spectral": settings.SpectralSettings,
-            "criteria": Criteria, "test_points": settings.TestPointSettings}
-
-
-def write_docs(text: str) -> str:
-    """``text`` (docs/case-file.md) with every ``<!-- settings: NAME -->`` block regenerated."""
-    tables = generated_tables()
+def write_docs(text: str, tables: Mapping[str, type]) -> str:
+    """``text`` (docs/case-file.md) with every ``<!-- settings: NAME -->`` block regenerated from
+    ``tables`` (marker name -> settings dataclass)."""
 
     def sub(m):
         return m.group(1) + markdown_table(tables[m.group("name")]) + "\n" + m.group(4)
 
     return _BLOCK.sub(sub, text)
-
-
-if __name__ == "__main__":                     # python -m livesweep.settings_schema [docs/case-file.md]
-    import sys
-    from pathlib import Path
-
-    page = Path(sys.argv[1] if len(sys.argv) > 1 else Path(__file__).resolve().parents[2] / "docs" / "case-file.md")
-    new = write_docs(page.read_text(encoding="utf-8"))
-    page.write_text(new, encoding="utf-8")
-    print(f"{page}: settings tables regenerated")
