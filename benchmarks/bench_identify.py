@@ -15,6 +15,11 @@ Current is timed three ways:
 * warm: the logs decoded before, as when a case file is edited and run again;
 * warm, ``--no-plots``: what ``batch`` and CI pay.
 
+Beside every time, the import floor measured in the same run: the wall time of a fresh
+``python -c "import numpy, scipy"`` (interpreter start-up and the two imports every run pays
+before livesweep does anything; best of 3), and each time minus that floor -- the part livesweep's
+own code can change.
+
     python benchmarks/bench_identify.py [--rounds 5] [--base 67c61f1]
 """
 
@@ -45,6 +50,16 @@ def _run(src: Path, cwd: Path, out: Path, env: dict, *extra: str) -> float:
     return elapsed
 
 
+def import_floor_s(env: dict, repeats: int = 3) -> float:
+    """Best wall time of ``repeats`` fresh ``python -c "import numpy, scipy"`` processes [s]."""
+    best = float("inf")
+    for _ in range(repeats):
+        t = time.perf_counter()
+        subprocess.run([sys.executable, "-c", "import numpy, scipy"], env=env, check=True)
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--rounds", type=int, default=5)
@@ -66,6 +81,7 @@ def main() -> int:
         _run(ROOT / "src", ROOT, tmp / "prime", {**env, "LIVESWEEP_CACHE_DIR": str(warm_cache)})   # also compiles .pyc
         if base is not None:
             _run(base / "src", base, tmp / "prime_base", env)
+        floor = import_floor_s(env)
         for k in range(args.rounds):
             if base is not None:
                 times["baseline"].append(_run(base / "src", base, tmp / "out_base", env))
@@ -76,14 +92,18 @@ def main() -> int:
             times["warm, --no-plots"].append(_run(ROOT / "src", ROOT, tmp / "out_np", warm, "--no-plots"))
         print(f"livesweep identify {CASE} (every stage, report), {args.rounds} rounds, {os.cpu_count()} CPUs; "
               "median [min-max] wall time of a fresh process")
+        print(f"  import floor: {floor:.2f} s (fresh python -c \"import numpy, scipy\", best of 3, this run); "
+              "'above floor' = median - floor")
         ref = statistics.median(times["baseline"]) if times["baseline"] else None
         for name, ts in times.items():
             if not ts:
                 continue
             med = statistics.median(ts)
-            ratio = f"   {ref / med:4.2f}x faster than the baseline" if ref and name != "baseline" else ""
+            ratio = (f"   {ref / med:4.2f}x faster than the baseline ({(ref - floor) / (med - floor):4.2f}x above the "
+                     "floor)") if ref and name != "baseline" else ""
             label = f"baseline ({args.base})" if name == "baseline" else f"current, {name}"
-            print(f"  {label:28s} {med:5.2f} s [{min(ts):.2f}-{max(ts):.2f}]{ratio}")
+            print(f"  {label:28s} {med:5.2f} s [{min(ts):.2f}-{max(ts):.2f}], floor {floor:.2f} s, above floor "
+                  f"{med - floor:5.2f} s{ratio}")
     finally:
         if base is not None and base.exists():
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base)], capture_output=True)

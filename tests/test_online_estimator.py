@@ -365,3 +365,238 @@ def test_a_result_made_from_a_whole_matrix_gives_the_same_responses():
     np.testing.assert_allclose(b.auto, r.auto, rtol=1e-9)
     np.testing.assert_allclose(b.cross("y", "u2"), ws.G[2, 1], rtol=1e-12)
     assert b.G is not ws.G and not b.G.flags.writeable
+
+
+# --- the incremental result against a from-scratch numpy/scipy estimate ---------------------------
+
+def _scipy_window(x, starts, n, hop, n_fft, fs, k0, n_f):
+    """The spectral matrix of the segments ``starts`` from scratch: ``scipy.signal.csd`` (Welch,
+    periodic Hann, mean removed, one-sided density, zero-padded to ``n_fft``) of every pair over the
+    slice that holds exactly those segments, at bins ``k0 .. k0 + n_f - 1``."""
+    from scipy.signal import csd
+
+    seg = x[:, starts[0]:starts[-1] + n]
+    m = x.shape[0]
+    G = np.empty((m, m, n_f), complex)
+    for i in range(m):
+        _, p = csd(seg[i][None, :], seg, fs=fs, window="hann", nperseg=n, noverlap=n - hop, nfft=n_fft,
+                   detrend="constant", scaling="density", return_onesided=True, average="mean")
+        G[i] = p[:, k0:k0 + n_f]
+    return G
+
+
+def _numpy_miso(G, inputs, outputs):
+    """Textbook MISO conditioning per output and frequency (Bendat & Piersol ch. 7): H solves
+    Gxx H = Gxy; with C the inverse of the (inputs, output) block scaled to unit diagonal, the
+    partial coherence is |C_iy|^2 / (C_ii C_yy) and the multiple coherence 1 - 1 / C_yy."""
+    q, n_f = len(inputs), G.shape[-1]
+    H = np.empty((len(outputs), q, n_f), complex)
+    pc, mc = np.empty(H.shape), np.empty((len(outputs), n_f))
+    for a, o in enumerate(outputs):
+        idx = list(inputs) + [o]
+        for f in range(n_f):
+            S = G[np.ix_(idx, idx, [f])][..., 0]
+            H[a, :, f] = np.linalg.solve(S[:q, :q], S[:q, q])
+            d = np.sqrt(np.diag(S).real)
+            C = np.linalg.inv(S / np.outer(d, d))
+            pc[a, :, f] = np.abs(C[:q, q]) ** 2 / (np.diag(C)[:q].real * C[q, q].real)
+            mc[a, f] = 1.0 - 1.0 / C[q, q].real
+    return H, pc, mc
+
+
+def _rel(a, ref):
+    return float(np.max(np.abs(a - ref) / np.abs(ref)))
+
+
+def test_sliding_result_equals_scipy_from_scratch_on_the_same_window():
+    """After hundreds of segments have entered and left the window (running sums added to and
+    subtracted from), the estimator's spectral matrix and its ordinary and MISO responses equal a
+    from-scratch scipy/numpy estimate of the segments in the window, to 1e-9 relative."""
+    rng = np.random.default_rng(21)
+    n_rec, fs = 30_000, FS
+    u = rng.standard_normal((3, n_rec))
+    u[1] += 0.3 * u[0]                                        # partly correlated inputs
+    kern = np.exp(-np.arange(40) / 8.0)
+    y = np.vstack([np.convolve(u[0] - 0.4 * u[1] + 0.2 * u[2], kern)[:n_rec],
+                   np.convolve(0.5 * u[2] + u[1], kern[:15])[:n_rec]]) + 0.2 * rng.standard_normal((2, n_rec))
+    x = np.vstack([u, y]) + np.array([[1.0], [-2.0], [0.5], [3.0], [-1.0]])
+    names = ["u1", "u2", "u3", "y1", "y2"]
+    ins, outs = ["u1", "u2", "u3"], ["y1", "y2"]
+    est = OnlineSpectralEstimator(names, ins, outs, fs, BAND, window_s=40.0, segment_s=SEG_S)
+    n, hop, n_fft, k0 = est.n, est.hop, est.n_fft, est._k0
+    checked = []
+
+    def check(consumed):
+        if consumed < 20_000 or len(checked) >= 6 or consumed % 3:
+            return
+        r = est.result()
+        s = r.segment_starts
+        np.testing.assert_array_equal(s, _expected_starts(consumed, n, hop, est._W))
+        G = _scipy_window(x, s, n, hop, n_fft, fs, k0, r.omega.size)
+        assert _rel_err(r.G, G) < TOL
+        o = r.ordinary
+        for a in range(2):
+            for b in range(3):
+                gxy, gxx, gyy = G[b, 3 + a], G[b, b].real, G[3 + a, 3 + a].real
+                assert _rel(o.H[a, b], gxy / gxx) < TOL
+                assert _rel(o.coherence[a, b], np.abs(gxy) ** 2 / (gxx * gyy)) < TOL
+        H, pc, mc = _numpy_miso(G, [0, 1, 2], [3, 4])
+        c = r.conditioned
+        assert c.ill_conditioned.mean() < 0.1          # mostly well conditioned (compared everywhere)
+        assert _rel(c.H, H) < TOL
+        assert _rel(c.coherence, pc) < TOL
+        assert _rel(c.multiple_coherence, mc) < TOL
+        checked.append(consumed)
+
+    _feed(est, x, [37, 400, 1, 113, 250], on_block=check)
+    assert len(checked) == 6 and est.n_segment_transforms > 300
+
+
+def test_referenced_responses_equal_numpy_from_scratch():
+    """The references' legs conditioned from the running sums, combined (``combine_legs``), equal
+    the legs conditioned from scratch per frequency with numpy on the scipy spectral matrix."""
+    from livesweep.spectral.reference import combine_legs
+    from livesweep.spectral.spectra import random_error as eps_of
+
+    rng = np.random.default_rng(5)
+    n_rec = 12_000
+    r_ = rng.standard_normal((2, n_rec))
+    d = np.convolve(rng.standard_normal(n_rec), np.ones(20) / 20)[:n_rec]          # a disturbance
+    u = np.vstack([r_[0] - 0.5 * d, r_[1] + 0.3 * r_[0] + 0.2 * d])
+    y = np.vstack([np.convolve(u[0] + 0.5 * u[1], np.exp(-np.arange(30) / 5.0))[:n_rec] + d,
+                   np.convolve(u[1], [0.3, 0.2, 0.1])[:n_rec]]) + 0.1 * rng.standard_normal((2, n_rec))
+    x = np.vstack([r_, u, y])
+    names = ["r1", "r2", "u1", "u2", "y1", "y2"]
+    est = OnlineSpectralEstimator(names, ["u1", "u2"], ["y1", "y2"], FS, BAND, window_s=60.0, segment_s=SEG_S,
+                                  references=["r1", "r2"])
+    _feed(est, x, [333])
+    res = est.result()
+    s = res.segment_starts
+    G = _scipy_window(x, s, est.n, est.hop, est.n_fft, FS, est._k0, res.omega.size)
+    Tu, pcu, _ = _numpy_miso(G, [0, 1], [2, 3])
+    Ty, pcy, mcy = _numpy_miso(G, [0, 1], [4, 5])
+    dof = res.n_eff - 1
+    ref = combine_legs(Tu, pcu, eps_of(pcu, dof), Ty, pcy, eps_of(pcy, dof), mcy, np.zeros(res.omega.size, bool))
+    rr = res.referenced
+    ok = ~rr.ill_conditioned
+    assert ok.sum() > 0.9 * ok.size
+    assert _rel(rr.H[..., ok], ref.H[..., ok]) < TOL
+    assert _rel(rr.coherence[..., ok], ref.coherence[..., ok]) < TOL
+    assert _rel(rr.multiple_coherence[..., ok], ref.multiple_coherence[..., ok]) < TOL
+    assert _rel(rr.random_error[..., ok], ref.random_error[..., ok]) < 1e-8
+
+
+def _per_block(r, cond, targets):
+    """The previous implementation: each (conditioning signals, target) block conditioned on its own."""
+    q = len(cond)
+    out = [online_mod._condition(r._block(list(cond) + [t]), q, r.max_input_coherence, r.n_segments)
+           for t in targets]
+    ill = np.logical_or.reduce([o[3] for o in out])
+    return (np.array([o[0] for o in out]), np.array([o[1] for o in out]), np.array([o[2] for o in out]),
+            ill | (online_mod.input_coherence_max(r._block(list(cond)), list(range(q))) > r.max_input_coherence))
+
+
+@pytest.mark.parametrize("case", ["plain", "quiet output", "quiet input", "explained output", "few segments"])
+def test_conditioning_all_outputs_at_once_equals_each_block_on_its_own(case):
+    """The vectorised conditioning (one inverse per frequency for every output) gives the numbers,
+    NaNs and flags of conditioning each output's block on its own, including quiet signals, an
+    output the inputs explain exactly and too few segments."""
+    rng = np.random.default_rng(3)
+    n_rec = 3000
+    u = rng.standard_normal((2, n_rec))
+    u[1] += 0.5 * u[0]
+    y = np.vstack([np.convolve(u[0] + u[1], np.ones(4) / 4)[:n_rec] + 0.3 * rng.standard_normal(n_rec),
+                   np.convolve(u[1], [0.5, 0.5])[:n_rec] + 0.1 * rng.standard_normal(n_rec),
+                   0.2 * u[0] + 0.1 * rng.standard_normal(n_rec)])
+    if case == "quiet output":
+        y[1] = 0.0
+    elif case == "quiet input":
+        u[1] = 0.0
+    elif case == "explained output":
+        y[2] = 0.7 * u[0] - 0.2 * u[1]
+    x = np.vstack([u, y])
+    names = ["u1", "u2", "y1", "y2", "y3"]
+    est = OnlineSpectralEstimator(names, ["u1", "u2"], ["y1", "y2", "y3"], FS, BAND, window_s=60.0,
+                                  segment_s=SEG_S)
+    _feed(est, x[:, :480] if case == "few segments" else x, [250])
+    r = est.result()
+    c = r.conditioned
+    H, pc, mc, ill = _per_block(r, [0, 1], [2, 3, 4])
+    np.testing.assert_array_equal(c.ill_conditioned, ill)
+    np.testing.assert_array_equal(np.isnan(c.H), np.isnan(H))
+    if case == "explained output":
+        # y3 = 0.7 u1 - 0.2 u2 exactly: H is exact, its block singular to rounding (its coherences
+        # are rounding residue, as before), the other outputs unaffected
+        np.testing.assert_allclose(c.H[2], np.broadcast_to([[0.7], [-0.2]], c.H[2].shape), rtol=1e-9)
+        H, pc, mc, c_H, c_pc, c_mc = H[:2], pc[:2], mc[:2], c.H[:2], c.coherence[:2], c.multiple_coherence[:2]
+    else:
+        c_H, c_pc, c_mc = c.H, c.coherence, c.multiple_coherence
+    f = np.isfinite(H)                          # compared wherever a block could be conditioned, flagged or not
+    np.testing.assert_allclose(c_H[f], H[f], rtol=1e-9)
+    np.testing.assert_allclose(c_pc[f], pc[f], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(c_mc[f[:, 0]], mc[f[:, 0]], rtol=1e-9, atol=1e-12)
+    np.testing.assert_array_equal(c_pc[~f], 0.0)
+    np.testing.assert_array_equal(c_mc[~f[:, 0]], 0.0)
+    if case == "quiet output":
+        assert np.all(c.ill_conditioned) and np.all(np.isnan(c.H[1])) and np.isfinite(c.H[[0, 2]]).all()
+    elif case in ("quiet input", "few segments"):
+        assert np.all(c.ill_conditioned) and np.all(np.isnan(c.H))
+    else:
+        assert f.mean() > 0.9
+
+
+def test_condition_many_equals_condition_blocks_with_signals_quiet_at_some_frequencies():
+    """``_condition_many`` against :func:`livesweep.spectral.miso.condition_blocks` on each
+    (inputs, target) block, with an input quiet at some frequencies and a target at others."""
+    from livesweep.spectral.miso import condition_blocks
+
+    rng = np.random.default_rng(8)
+    q, T, K, n_f = 3, 4, 12, 30
+    X = rng.standard_normal((q + T, K, n_f)) + 1j * rng.standard_normal((q + T, K, n_f))
+    X[q:] += 0.8 * X[0] - 0.5 * X[1]
+    X[1, :, [3, 7]] = 0.0                        # an input quiet there: every target blank
+    X[q + 2, :, [5, 11]] = 0.0                   # one target quiet there: that target blank
+    G = np.einsum("ikf,jkf->ijf", X.conj(), X)
+    auto = np.einsum("iif->if", G).real
+    cond, targets = [0, 1, 2], [3, 4, 5, 6]
+    H, pc, mc, ill, redo = online_mod._condition_many(G[np.ix_(cond, cond)], G[np.ix_(cond, targets)], auto[cond],
+                                                      auto[targets], K, np.zeros(n_f, bool))
+    assert len(redo) == 0
+    for a, t in enumerate(targets):
+        ref = condition_blocks(G[np.ix_(cond + [t], cond + [t])], q, max_input_coherence=2.0)
+        np.testing.assert_array_equal(np.isnan(H[a]), np.isnan(ref.H))
+        k = np.isfinite(ref.H)
+        np.testing.assert_allclose(H[a][k], ref.H[k], rtol=1e-9)
+        np.testing.assert_allclose(pc[a], ref.partial_coherence, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(mc[a], ref.multiple_coherence, rtol=1e-9, atol=1e-12)
+    expected = np.zeros(n_f, bool)
+    expected[[3, 5, 7, 11]] = True
+    np.testing.assert_array_equal(ill, expected)
+
+
+def test_later_results_of_a_window_have_every_field_of_the_first():
+    """The estimator's results (made without ``__init__``) hold every field of the dataclass; a
+    later result of an unchanged window the same ones as its first result, with its own time."""
+    import dataclasses
+
+    x = _record(4000, seed=4)
+    valid = np.ones(x.shape[1], bool)
+    valid[1500:1510] = False
+    est = OnlineSpectralEstimator(NAMES, ["u1", "u2"], ["y"], FS, BAND, window_s=20.0, segment_s=SEG_S)
+    est.update(x[:, :1610], valid[:1610])
+    r1 = est.result()
+    est.update(x[:, 1610:1620], valid[1610:1620])
+    r2 = est.result()
+    assert type(r2) is type(r1)
+    assert {f.name for f in dataclasses.fields(r1)} <= set(vars(r1)) and set(vars(r1)) == set(vars(r2))
+    for f in dataclasses.fields(r1):
+        a, b = getattr(r1, f.name), getattr(r2, f.name)
+        if f.name == "t_end_s":
+            assert b == pytest.approx(1620 / FS) and a == pytest.approx(1610 / FS)
+        elif isinstance(a, np.ndarray):
+            assert b is a
+        else:
+            assert b == a, f.name
+    assert r2.n_excluded == r1.n_excluded > 0
+    assert r2.conditioned.H is r1.conditioned.H and r2.conditioned.settings["t_end_s"] == pytest.approx(1620 / FS)
+    assert "OnlineResult(" in repr(r2)

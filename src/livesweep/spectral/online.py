@@ -21,6 +21,9 @@ makes one real-FFT call over the segments completed by the new samples only, plu
 product per segment added or removed: independent of ``window_s``. The drift resyncs below are
 the exception -- they re-sum the ``K`` stored transforms, only at the flagged frequencies -- and
 are rare (none in the 600 s benchmark, 23 in 10 000 segments of a stream with 1e4 bursts).
+The responses of a changed window are computed once, when a result first asks, from the running
+sums: the ordinary ones elementwise, the MISO-conditioned ones of every output through one inverse
+of the inputs' coherence matrix per frequency (:func:`_condition_many`).
 Memory: the transforms of the segments in the window (``n_signals x n_freq`` complex each) and the
 un-segmented tail of the stream.
 
@@ -49,6 +52,7 @@ import math
 from collections import deque
 from dataclasses import InitVar, dataclass, field
 from functools import cached_property
+from operator import itemgetter
 
 import numpy as np
 
@@ -57,7 +61,7 @@ from livesweep.errors import ConfigError, require_number
 from livesweep.spectral.miso import condition_blocks, input_coherence_max
 from livesweep.spectral.reference import combine_legs
 from livesweep.spectral.response import FrequencyResponseSet
-from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW, _random_error_of_incoherence, random_error
+from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW, _random_error_of_incoherence
 from livesweep.spectral.transform import bin_grid, fft_length, segment_spectra
 from livesweep.spectral.windows import effective_averages, hann
 
@@ -99,7 +103,8 @@ class _Layout:
     """Where the estimator's signals sit, worked out once: drivers (inputs and references, in
     signal order), inputs, outputs, and the input pairs of the input coherence."""
 
-    __slots__ = ("drivers", "driver_rows", "inputs", "outputs", "input_rows", "pair_a", "pair_b", "pair_rows")
+    __slots__ = ("drivers", "driver_rows", "inputs", "outputs", "input_rows", "pair_a", "pair_b", "pair_rows",
+                 "inputs_at", "outputs_at", "input_rows_at", "driver_rows_at")
 
     def __init__(self, names, inputs, outputs, references):
         self.drivers = tuple(sorted({names.index(n) for n in tuple(inputs) + tuple(references)}))
@@ -109,6 +114,16 @@ class _Layout:
         self.input_rows = np.array([self.drivers.index(i) for i in self.inputs], dtype=np.intp)
         a, b = np.triu_indices(len(self.inputs), 1)
         self.pair_a, self.pair_b, self.pair_rows = self.inputs[a], self.inputs[b], self.input_rows[a]
+        # the same, as slices where they are runs (the usual layout): views instead of copies
+        self.inputs_at, self.outputs_at, self.input_rows_at, self.driver_rows_at = (
+            _run(i) for i in (self.inputs, self.outputs, self.input_rows, self.driver_rows))
+
+
+def _run(idx: np.ndarray):
+    """``slice(a, b)`` when ``idx`` is ``a, a+1, .., b-1``, else ``idx``: indexes the same elements."""
+    if idx.size and np.array_equal(idx, np.arange(idx[0], idx[0] + idx.size)):
+        return slice(int(idx[0]), int(idx[0]) + idx.size)
+    return idx
 
 
 class _WindowSums:
@@ -199,6 +214,17 @@ class OnlineResult:
                 self._memo.setdefault("G", G)
             else:
                 self._memo.setdefault("G", _readonly(G.copy()))
+
+    @classmethod
+    def _of_window(cls, window: dict, t_end_s: float, n_excluded: int) -> "OnlineResult":
+        """The estimator's result: every field but ``t_end_s`` and ``n_excluded`` from ``window``,
+        which the estimator builds once per window contents and shares between that window's
+        results (so with their memo). Made without ``__init__``: its one check, that a result has
+        its spectral matrix or the running sums, holds by construction (``_sums`` is set)."""
+        r = object.__new__(cls)
+        r.__dict__.update(window)
+        r.__dict__["t_end_s"], r.__dict__["n_excluded"] = t_end_s, n_excluded
+        return r
 
     def _shared(self, key: str, compute):
         """``compute()``, once per window contents (see the class docstring)."""
@@ -319,8 +345,9 @@ class OnlineResult:
             gxy = self.G[np.ix_(ii, io)]                                 # (n_in, n_out, f): G[x, y]
             auto = self.auto
         else:                                                            # from the sums: the scale cancels
-            ii, io = s.layout.inputs, s.layout.outputs
-            gxy = s.rows[np.ix_(s.layout.input_rows, io)]
+            lay = s.layout
+            ii, io = lay.inputs_at, lay.outputs_at
+            gxy = s.rows[lay.input_rows_at][:, io]
             auto = s.auto
         gxx = auto[ii][:, None, :]                                       # (n_in, 1, f)
         den = gxx * auto[io][None, :, :]
@@ -343,32 +370,73 @@ class OnlineResult:
 
         ``H`` is NaN where the input autospectrum is zero.
         """
-        H, coh, eps = self._shared("ordinary", self._ordinary_arrays)
-        ill = self.input_coherence > self.max_input_coherence if len(self.inputs) > 1 else None
-        return FrequencyResponseSet(tuple(self.outputs), tuple(self.inputs), self.omega, H, coh, eps, False,
-                                    None, ill, self._settings())
+        def build():
+            H, coh, eps = self._ordinary_arrays()
+            ill = _readonly(self.input_coherence > self.max_input_coherence) if len(self.inputs) > 1 else None
+            return self._response_set(False, H, coh, eps, None, ill)
+        return _restamped(self._shared("ordinary", build), self._settings())
 
-    def _conditioned_arrays(self):
-        q = len(self.inputs)
-        idx_in = [self.index(n) for n in self.inputs]
-        shape = (len(self.outputs), q, self.omega.size)
-        H, pc, eps = np.empty(shape, complex), np.empty(shape), np.empty(shape)
-        mc = np.empty((len(self.outputs), self.omega.size))
-        ill = np.zeros(self.omega.size, bool)
-        dof = self.n_eff - q + 1
-        for a, o in enumerate(self.outputs):
-            Ha, pca, mca, illa = _condition(self._block(idx_in + [self.index(o)]), q, self.max_input_coherence,
+    def _response_set(self, conditioned, H, coh, eps, mc, ill) -> FrequencyResponseSet:
+        """The response set of this window's contents (shared, see the class docstring); each result
+        hands out a copy with its own settings (:func:`_restamped`)."""
+        return FrequencyResponseSet(tuple(self.outputs), tuple(self.inputs), self.omega, H, coh, eps, conditioned,
+                                    mc, ill, {})
+
+    def _conditioning_spectra(self, cond, targets):
+        """What conditioning ``targets`` on ``cond`` (signal indices) needs, unscaled or scaled alike
+        (conditioning is scale-free): ``Gcc`` (q, q, f), ``Gct`` (q, T, f) and the autospectra of
+        both, from the driver rows of the running sums (``cond`` are drivers) or from ``G``."""
+        s = self._sums
+        if s is None or "G" in self._memo:
+            G = self.G
+            auto = np.diagonal(G, axis1=0, axis2=1).real.T
+            return G[np.ix_(cond, cond)], G[np.ix_(cond, targets)], auto[cond], auto[targets]
+        lay = s.layout
+        if list(cond) == lay.inputs.tolist() and list(targets) == lay.outputs.tolist():   # the usual: views
+            crow, cond, targets = lay.input_rows_at, lay.inputs_at, lay.outputs_at
+        else:
+            crow, cond, targets = (_run(np.array(i, dtype=np.intp)) for i in
+                                   ([s.drivers.index(i) for i in cond], cond, targets))
+        rows = s.rows[crow]
+        return rows[:, cond], rows[:, targets], s.auto[cond], s.auto[targets]
+
+    def _condition_all(self, cond, targets, ill_cond):
+        """Every signal of ``targets`` conditioned on the signals ``cond`` (:func:`_condition_many`);
+        the targets the fast path cannot do (a singular block) go through :func:`_condition` on
+        their own block, as before. ``ill_cond``: frequencies where ``cond`` are too coherent."""
+        q = len(cond)
+        out = _condition_many(*self._conditioning_spectra(cond, targets), self.n_segments, ill_cond)
+        if out is None:                                   # the conditioning signals' matrix is singular
+            redo, out = range(len(targets)), _nan_conditioned(len(targets), q, self.omega.size)
+        else:
+            redo = out[4]
+        H, pc, mc, ill = out[:4]
+        for a in redo:                                    # old path: per block, singular-safe
+            Ha, pca, mca, illa = _condition(self._block(list(cond) + [targets[a]]), q, self.max_input_coherence,
                                             self.n_segments)
             H[a], pc[a], mc[a] = Ha, pca, mca
             ill |= illa
-            eps[a] = random_error(pca, dof) if dof >= 1 else np.inf
-        return tuple(_readonly(a) for a in (H, pc, eps, mc, ill))
+        dof = self.n_eff - q + 1
+        if dof >= 1:                      # random_error of pc: in [0, 1] (NaN from a singular block: none)
+            u = np.subtract(1.0, pc)
+            eps = _random_error_of_incoherence(np.nan_to_num(u, copy=False, nan=1.0) if len(redo) else u, dof)
+        else:
+            eps = np.full(pc.shape, np.inf)
+        return H, pc, eps, mc, ill
+
+    def _conditioned_arrays(self):
+        ii = [self.index(n) for n in self.inputs]
+        io = [self.index(n) for n in self.outputs]
+        ill_in = self.input_coherence > self.max_input_coherence
+        return tuple(_readonly(a) for a in self._condition_all(ii, io, ill_in))
 
     @cached_property
     def conditioned(self) -> FrequencyResponseSet | None:
         """MISO-conditioned responses (more than one input), else None.
 
-        Per output, :func:`livesweep.spectral.miso.condition_output` over all inputs: conditioned H,
+        Per output, the arithmetic of :func:`livesweep.spectral.miso.condition_output` over all
+        inputs, for every output at once from the running sums (:func:`_condition_many`: one
+        inverse of the inputs' coherence matrix per frequency serves all outputs): conditioned H,
         partial coherence (stored as ``coherence``), multiple coherence, ill-conditioned flags.
         Random error from the partial coherence with ``n_eff - q + 1`` degrees of freedom (q inputs;
         method.md §6.2); ``inf`` while ``n_eff - q + 1 < 1``. With fewer than ``q + 1`` segments the
@@ -377,27 +445,18 @@ class OnlineResult:
         """
         if len(self.inputs) < 2:
             return None
-        H, pc, eps, mc, ill = self._shared("conditioned", self._conditioned_arrays)
-        return FrequencyResponseSet(tuple(self.outputs), tuple(self.inputs), self.omega, H, pc, eps, True, mc, ill,
-                                    {**self._settings(), "max_input_coherence": self.max_input_coherence})
+        window_set = self._shared("conditioned", lambda: self._response_set(True, *self._conditioned_arrays()))
+        return _restamped(window_set, {**self._settings(), "max_input_coherence": self.max_input_coherence})
 
     def _referenced_arrays(self):
-        q = len(self.references)
         idx_ref = [self.index(n) for n in self.references]
-        dof = self.n_eff - q + 1
-        legs, ill = {}, np.zeros(self.omega.size, bool)
-        for key, names in (("u", self.inputs), ("y", self.outputs)):
-            T = np.empty((len(names), q, self.omega.size), complex)
-            pc, eps = np.empty(T.shape), np.empty(T.shape)
-            mc = np.empty((len(names), self.omega.size))
-            for a, n in enumerate(names):
-                T[a], pc[a], mc[a], ill_a = _condition(self._block(idx_ref + [self.index(n)]), q,
-                                                       self.max_input_coherence, self.n_segments)
-                eps[a] = random_error(pc[a], dof) if dof >= 1 else np.inf
-                ill |= ill_a
-            legs[key] = (T, pc, eps, mc)
-        (Tur, pcu, epsu, _), (Tyr, pcy, epsy, mcy) = legs["u"], legs["y"]
-        rr = combine_legs(Tur, pcu, epsu, Tyr, pcy, epsy, mcy, ill)
+        ii = [self.index(n) for n in self.inputs]
+        io = [self.index(n) for n in self.outputs]
+        Gcc, _, acc, _ = self._conditioning_spectra(idx_ref, [])
+        ill_ref = _max_pair_coherence(Gcc, acc) > self.max_input_coherence
+        T, pc, eps, mc, ill = self._condition_all(idx_ref, ii + io, ill_ref)
+        u, y = slice(0, len(ii)), slice(len(ii), None)
+        rr = combine_legs(T[u], pc[u], eps[u], T[y], pc[y], eps[y], mc[y], ill)
         return tuple(_readonly(a) for a in (rr.H, rr.coherence, rr.random_error, rr.multiple_coherence,
                                             rr.ill_conditioned))
 
@@ -405,13 +464,12 @@ class OnlineResult:
     def referenced(self) -> FrequencyResponseSet | None:
         """Responses through the references, ``(y/r)(u/r)^-1`` (:mod:`livesweep.spectral.reference`),
         from this window's spectral matrix; None without references. Each leg is conditioned on
-        all references (:func:`_condition`, singular-safe), with ``n_eff - q + 1`` degrees of freedom
-        for its random error."""
+        all references (:func:`_condition_many`; :func:`_condition` where a block is singular), with
+        ``n_eff - q + 1`` degrees of freedom for its random error."""
         if not self.references:
             return None
-        H, coh, eps, mc, ill = self._shared("referenced", self._referenced_arrays)
-        return FrequencyResponseSet(tuple(self.outputs), tuple(self.inputs), self.omega, H, coh, eps, True, mc, ill,
-                                    {**self._settings(), "references": list(self.references)})
+        window_set = self._shared("referenced", lambda: self._response_set(True, *self._referenced_arrays()))
+        return _restamped(window_set, {**self._settings(), "references": list(self.references)})
 
     @property
     def best(self) -> FrequencyResponseSet:
@@ -435,6 +493,16 @@ def _readonly(a: np.ndarray) -> np.ndarray:
     a = np.asarray(a)
     a.setflags(write=False)
     return a
+
+
+def _restamped(window_set: FrequencyResponseSet, settings: dict) -> FrequencyResponseSet:
+    """A copy of a window's response set with a result's own ``settings`` (``t_end_s`` and
+    ``excluded_for_gaps`` move on while the window's contents stay): the same read-only arrays,
+    already checked when the set was made, so the copy skips ``__init__``."""
+    out = object.__new__(FrequencyResponseSet)
+    out.__dict__.update(window_set.__dict__)
+    out.__dict__["settings"] = settings
+    return out
 
 
 def _G_property(self) -> np.ndarray:
@@ -479,6 +547,110 @@ def _condition(S, q, max_input_coherence, n_segments):
             H[:, f], pc[:, f], mc[f], ill[f] = c.H[:, 0], c.partial_coherence[:, 0], c.multiple_coherence[0], \
                 c.ill_conditioned[0]
         return H, pc, mc, ill
+
+
+def _nan_conditioned(n_targets, q, n_f):
+    """Nothing conditioned: H NaN, coherences 0, every frequency flagged."""
+    return (np.full((n_targets, q, n_f), np.nan + 0j), np.zeros((n_targets, q, n_f)), np.zeros((n_targets, n_f)),
+            np.ones(n_f, bool))
+
+
+def _max_pair_coherence(Gcc, acc) -> np.ndarray:
+    """Largest ordinary coherence ``|G_ij|^2 / (G_ii G_jj)`` between two of the signals of the
+    spectral block ``Gcc`` (q, q, f) with autospectra ``acc`` (q, f), per frequency; 1 where a
+    signal has no power, 0 for one signal (:func:`livesweep.spectral.miso.input_coherence_max`)."""
+    q = acc.shape[0]
+    if q < 2:
+        return np.zeros(acc.shape[-1])
+    a, b = np.triu_indices(q, 1)
+    g = Gcc[a, b]
+    den = acc[a] * acc[b]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c = np.where(den > 0, (g.real**2 + g.imag**2) / den, 1.0)
+    return np.clip(c, 0.0, 1.0).max(axis=0)
+
+
+def _condition_many(Gcc, Gct, acc, att, n_segments, ill_cond):
+    """Every target conditioned on the same q signals at once (method.md §6): the arithmetic of
+    :func:`livesweep.spectral.miso.condition_blocks` on each (q+1)x(q+1) block over (conditioning
+    signals, target), through the block inverse, so that one inverse per frequency serves every
+    target.
+
+    With ``R = D^-1 Gcc D^-1`` (the conditioning signals' coherence matrix, ``D`` their root
+    autospectra), ``r`` the target's cross-spectra scaled the same way and by its own root
+    autospectrum, ``P = R^-1`` and ``b = P r``: the block's inverse ``C`` (scaled to unit diagonal)
+    has ``C_yy = 1 / (1 - m)``, ``C_iy = -b_i C_yy``, ``C_ii = P_ii + |b_i|^2 C_yy`` with ``m = r^H b``,
+    so the multiple coherence is ``m``, the partial coherence ``|b_i|^2 / ((1 - m) P_ii + |b_i|^2)``
+    and ``H = Gcc^-1 Gct = D^-1 b sqrt(G_yy)``.
+
+    Parameters
+    ----------
+    Gcc : ndarray, complex, shape (q, q, f)
+        Spectral matrix of the conditioning signals (conjugate on the first index).
+    Gct : ndarray, complex, shape (q, T, f)
+        Their cross-spectra with the targets.
+    acc, att : ndarray, shape (q, f) and (T, f)
+        Autospectra (the same scale as ``Gcc`` and ``Gct``).
+    n_segments : int
+        Segments averaged (fewer than q + 1: nothing can be conditioned).
+    ill_cond : ndarray of bool, shape (f,)
+        Frequencies flagged ill-conditioned by the conditioning signals' cross-coherence.
+
+    Returns
+    -------
+    (H, pc, mc, ill, redo) or None
+        ``H``, ``pc`` (T, q, f), ``mc`` (T, f), ``ill`` (f,): where a signal of a block has no power
+        H is NaN, the coherences 0 and the frequency flagged (as ``condition_blocks``); ``redo``:
+        targets whose block is singular somewhere (``1 - m <= 0``), to be conditioned on their own.
+        None when ``Gcc`` itself is singular at some frequency.
+    """
+    q, T, n_f = Gcc.shape[0], Gct.shape[1], Gcc.shape[-1]
+    if n_segments < q + 1:
+        return _nan_conditioned(T, q, n_f) + ((),)
+    dx, dy = np.sqrt(acc), np.sqrt(att)
+    everywhere = dx.min() > 0 and dy.min() > 0                  # the usual case: every signal has power
+    if everywhere:
+        f, ill = slice(None), ill_cond.copy()
+    else:
+        ok_x = np.all(dx > 0, axis=0)                           # (f,): every conditioning signal has power
+        ok = ok_x & (dy > 0)                                    # (T, f): so has the target
+        if not ok.any():
+            return _nan_conditioned(T, q, n_f) + ((),)
+        f, ill = np.flatnonzero(ok_x), ill_cond | ~ok.all(axis=0)
+        dx, dy, Gcc, Gct = dx[:, f], dy[:, f], Gcc[..., f], Gct[..., f]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ix, iy = 1.0 / dx, 1.0 / dy
+        Rm = np.moveaxis(Gcc * (ix[:, None, :] * ix[None, :, :]), -1, 0)      # (F, q, q), unit diagonal
+        r = np.moveaxis(Gct * (ix[:, None, :] * iy[None, :, :]), -1, 0)        # (F, q, T)
+    d = np.arange(q)
+    Rm[:, d, d] = 1.0
+    try:
+        P = np.linalg.inv(Rm)
+    except np.linalg.LinAlgError:
+        return None
+    b = P @ r                                                   # (F, q, T)
+    m = np.einsum("fqt,fqt->ft", r.real, b.real)                # multiple coherence Re(r^H b), (F, T)
+    m += np.einsum("fqt,fqt->ft", r.imag, b.imag)
+    res = 1.0 - m                                               # 1 / C_yy: the unexplained fraction
+    b2 = b.real**2
+    b2 += b.imag**2
+    den = np.diagonal(P, axis1=1, axis2=2).real[:, :, None] * res[:, None, :]
+    den += b2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p = np.divide(b2, den, out=b2)                          # partial coherence, (F, q, T)
+        b *= (dy * ix[:, None, :]).transpose(2, 0, 1)          # H = D^-1 b sqrt(G_yy)
+    np.clip(p, 0.0, 1.0, out=p)
+    np.clip(m, 0.0, 1.0, out=m)
+    H, pc, mc = b.transpose(2, 1, 0), p.transpose(2, 1, 0), m.T   # (T, q, F), (T, q, F), (T, F)
+    okf = True if everywhere else ok[:, f]
+    redo = () if res.min() > 0 else np.flatnonzero(np.any(okf & ~(res.T > 0), axis=1))
+    if not everywhere:                                          # blanks where a signal has no power
+        Hs, pcs, mcs = _nan_conditioned(T, q, n_f)[:3]
+        Hs[:, :, f] = np.where(okf[:, None, :], H, np.nan + 0j)
+        pcs[:, :, f] = np.where(okf[:, None, :], pc, 0.0)
+        mcs[:, f] = np.where(okf, mc, 0.0)
+        H, pc, mc = Hs, pcs, mcs
+    return H, pc, mc, ill, redo
 
 
 class OnlineSpectralEstimator:
@@ -598,7 +770,7 @@ class OnlineSpectralEstimator:
         self._err = np.zeros((n_sig, n_f))                  # summation-error scale per autospectrum
         self._since_resync = 0
         self._version = 0                                   # bumped whenever the segments or their sum change
-        self._snapshot = None                               # (version, sums, starts, n_eff, memo) of the last result
+        self._snapshot = None                               # (version, fields of its results) of the last window
         self._n_eff: dict = {}                              # n_eff by number of segments
         # counters
         self.n_transform_calls = 0
@@ -641,12 +813,12 @@ class OnlineSpectralEstimator:
             raise ConfigError(f"block must have shape ({len(self.names)}, n_new) for signals "
                               f"{list(self.names)}, got {block.shape}")
         m = block.shape[1]
-        ok = np.ones(m, bool) if valid is None else np.asarray(valid, bool)
-        if ok.shape != (m,):
+        ok = True if valid is None else np.asarray(valid, bool)    # True: every sample valid
+        if valid is not None and ok.shape != (m,):
             raise ConfigError(f"valid must have shape ({m},) like the block's samples, got {ok.shape}")
-        finite = np.all(np.isfinite(block), axis=0)
-        bad = ok & ~finite
-        if np.any(bad):
+        if not np.isfinite(block).all():                         # rare: find the samples
+            finite = np.all(np.isfinite(block), axis=0)
+            bad = ok & ~finite
             self.n_nonfinite_samples += int(np.sum(bad))
             ok = ok & finite
         if m:
@@ -702,15 +874,14 @@ class OnlineSpectralEstimator:
             self._since_resync += added
             if self._since_resync >= self.resync_every:
                 self._resync(None)
-            elif removed:       # adding a segment raises the bound by at most eps: checked when one leaves
-                bad = self._drift_bound() > DRIFT_TOLERANCE
-                if np.any(bad):
-                    self._resync(bad)
+            elif removed and self._drifted():   # adding a segment raises the bound by at most eps:
+                self._resync(self._drifted(per_frequency=True))   # checked when one leaves
         return added
 
-    def _append(self, block: np.ndarray, ok: np.ndarray) -> None:
+    def _append(self, block: np.ndarray, ok) -> None:
         """Append samples to the un-segmented tail: moved to the front of its storage when the end
-        is reached, the storage doubled when even that is too small."""
+        is reached, the storage doubled when even that is too small. ``ok``: validity per sample,
+        or True for all."""
         m, n_sig = block.shape[1], self._buf.shape[0]
         off, length = self._buf_off, self._buf_len
         if off + length + m > self._buf.shape[1]:
@@ -728,7 +899,7 @@ class OnlineSpectralEstimator:
 
     def _add(self, Xk: np.ndarray, sign: int) -> None:
         # new arrays, never written in place: the results made so far keep referring to theirs
-        c = Xk[self._drivers].conj()[:, None, :] * Xk[None, :, :]
+        c = Xk[self._layout.driver_rows_at].conj()[:, None, :] * Xk[None, :, :]
         a = Xk.real**2 + Xk.imag**2
         if sign > 0:
             self._rows = np.add(self._rows, c, out=c)
@@ -739,12 +910,12 @@ class OnlineSpectralEstimator:
         # recursive-summation bound: eps * sum over operations of |partial sum| (autospectra are >= 0)
         self._err += np.abs(self._auto)
 
-    def _drift_bound(self) -> np.ndarray:
-        """Per frequency, the largest bound on the relative rounding error of the running sums
-        (inf where an autospectrum is 0 with rounding residue behind it; NaN ratios, 0 / 0, count
-        as no error)."""
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return _EPS * np.fmax.reduce(self._err / np.abs(self._auto), axis=0)
+    def _drifted(self, per_frequency: bool = False):
+        """Whether the bound on the relative rounding error of some running sum, ``eps * err /
+        |sum|``, exceeds ``DRIFT_TOLERANCE`` (so where a sum is 0 with rounding residue behind it;
+        0 / 0 counts as no error), compared without dividing: anywhere, or per frequency."""
+        over = self._err > (DRIFT_TOLERANCE / _EPS) * np.abs(self._auto)
+        return over.any(axis=0) if per_frequency else bool(over.any())
 
     def _resync(self, freqs: np.ndarray | None) -> None:
         """Recompute the running sums from the stored transforms: all frequencies, or those flagged."""
@@ -775,18 +946,19 @@ class OnlineSpectralEstimator:
         K = len(self._segs)
         if K == 0:
             return None
-        if self._snapshot is None or self._snapshot[0] != self._version:
-            starts = np.fromiter((s for s, _ in self._segs), dtype=np.int64, count=K)
-            starts.setflags(write=False)
-            n_eff = self._n_eff.get(K)
-            if n_eff is None:
-                n_eff = self._n_eff[K] = effective_averages(K, self.n, self.hop, self.taper)
-            sums = _WindowSums(self._layout, self._rows, self._auto, tuple(x for _, x in self._segs), self._scale / K)
-            self._snapshot = (self._version, sums, starts, n_eff, {})
-        _, sums, starts, n_eff, memo = self._snapshot
-        return OnlineResult(
-            omega=self.omega, names=self.names, inputs=self.inputs, outputs=self.outputs, G=None, n_segments=K,
-            n_eff=n_eff, window_s=self.window_s, segment_s=self.segment_s, t_end_s=self.time_s, overlap=self.overlap,
-            sample_rate_hz=self.sample_rate_hz, segment_starts=starts, n_excluded=len(self._excluded),
-            max_input_coherence=self.max_input_coherence, references=self.references, _sums=sums, _memo=memo,
-        )
+        if self._snapshot is not None and self._snapshot[0] == self._version:
+            return OnlineResult._of_window(self._snapshot[1], self.time_s, len(self._excluded))
+        starts = np.fromiter(map(itemgetter(0), self._segs), dtype=np.int64, count=K)
+        starts.setflags(write=False)
+        n_eff = self._n_eff.get(K)
+        if n_eff is None:
+            n_eff = self._n_eff[K] = effective_averages(K, self.n, self.hop, self.taper)
+        sums = _WindowSums(self._layout, self._rows, self._auto, tuple(map(itemgetter(1), self._segs)),
+                           self._scale / K)
+        window = dict(omega=self.omega, names=self.names, inputs=self.inputs, outputs=self.outputs, n_segments=K,
+                      n_eff=n_eff, window_s=self.window_s, segment_s=self.segment_s, overlap=self.overlap,
+                      sample_rate_hz=self.sample_rate_hz, segment_starts=starts,
+                      max_input_coherence=self.max_input_coherence, references=self.references, _sums=sums,
+                      _memo={})
+        self._snapshot = (self._version, window)
+        return OnlineResult._of_window(window, self.time_s, len(self._excluded))
