@@ -600,3 +600,83 @@ def test_later_results_of_a_window_have_every_field_of_the_first():
     assert r2.n_excluded == r1.n_excluded > 0
     assert r2.conditioned.H is r1.conditioned.H and r2.conditioned.settings["t_end_s"] == pytest.approx(1620 / FS)
     assert "OnlineResult(" in repr(r2)
+
+
+#: The ``__post_init__`` methods the cached-result shortcut was checked against
+#: (``livesweep.spectral.online_result._instance_without_init``): on the values that shortcut copies
+#: they do nothing (OnlineResult: no ``G`` is given and the running sums are set;
+#: FrequencyResponseSet: the arrays were frozen and checked when the copied set was made, and only
+#: ``settings`` changes, which it does not look at).
+_POST_INIT_THE_SHORTCUT_SKIPS = {
+    "FrequencyResponseSet": '''\
+def __post_init__(self):
+    for name in ("omega", "H", "coherence", "random_error", "multiple_coherence", "ill_conditioned"):
+        object.__setattr__(self, name, _readonly(getattr(self, name)))
+    want = (len(self.outputs), len(self.inputs), self.omega.size)
+    for name in ("H", "coherence", "random_error"):
+        if getattr(self, name).shape != want:
+            raise ConfigError(f"FrequencyResponseSet: {name} has shape {getattr(self, name).shape}, "
+                              f"expected (outputs, inputs, frequencies) = {want}")
+''',
+    "OnlineResult": '''\
+def __post_init__(self, G):
+    if G is None and self._sums is None:
+        raise ConfigError("an OnlineResult needs its spectral matrix G")
+    if G is not None:                       # given whole: everything is read from it
+        G = np.asarray(G)
+        if not G.flags.writeable:
+            self._memo.setdefault("G", G)
+        else:
+            self._memo.setdefault("G", _readonly(G.copy()))
+''',
+}
+
+
+def test_the_cached_result_shortcut_skips_no_post_init_check():
+    """The per-block results of an unchanged window, and their response sets, are made without
+    ``__init__`` (``online_result._instance_without_init``), so no ``__post_init__`` runs on them.
+    This fails when FrequencyResponseSet or OnlineResult gains a ``__post_init__`` (or a base class
+    one) or changes the one it has, so a new check cannot be skipped silently: review the shortcut,
+    then update ``_POST_INIT_THE_SHORTCUT_SKIPS``. It also checks that the shortcut's copies equal
+    what ``__init__`` makes from the same fields, and that the classes keep their fields in
+    ``__dict__`` (no ``__slots__``), which the shortcut writes."""
+    import dataclasses
+    import inspect
+    import textwrap
+
+    from livesweep.spectral.online import OnlineResult
+    from livesweep.spectral.response import FrequencyResponseSet
+
+    for cls in (FrequencyResponseSet, OnlineResult):
+        assert dataclasses.is_dataclass(cls) and "__slots__" not in vars(cls), cls.__name__
+        owners = [c.__name__ for c in cls.__mro__ if "__post_init__" in vars(c)]
+        assert owners == [cls.__name__], f"{cls.__name__}: __post_init__ defined by {owners}"
+        source = textwrap.dedent(inspect.getsource(cls.__post_init__))
+        assert source == _POST_INIT_THE_SHORTCUT_SKIPS[cls.__name__], (
+            f"{cls.__name__}.__post_init__ changed: the cached result path skips it "
+            f"(livesweep.spectral.online_result._instance_without_init); review that, then update this test")
+
+    def same(a, b):
+        if isinstance(a, np.ndarray):
+            return (isinstance(b, np.ndarray) and a.dtype == b.dtype and a.shape == b.shape
+                    and a.flags.writeable == b.flags.writeable and np.array_equal(a, b, equal_nan=True))
+        return a == b
+
+    x = _record(4000, seed=4)
+    est = OnlineSpectralEstimator(NAMES, ["u1", "u2"], ["y"], FS, BAND, window_s=20.0, segment_s=SEG_S,
+                                  references=["u1", "u2"])
+    est.update(x[:, :1610])
+    first = est.result()
+    for s in (first.ordinary, first.conditioned, first.referenced):
+        assert s is not None
+    est.update(x[:, 1610:1620])                          # completes no segment: the cached path
+    r = est.result()
+    assert r._memo is first._memo
+    built = OnlineResult(G=None, **{f.name: getattr(r, f.name) for f in dataclasses.fields(OnlineResult)})
+    for f in dataclasses.fields(OnlineResult):
+        assert same(getattr(r, f.name), getattr(built, f.name)), f.name
+    assert set(vars(r)) == set(vars(built))
+    for s in (r.ordinary, r.conditioned, r.referenced):
+        made = FrequencyResponseSet(**{f.name: getattr(s, f.name) for f in dataclasses.fields(FrequencyResponseSet)})
+        for f in dataclasses.fields(FrequencyResponseSet):
+            assert same(getattr(s, f.name), getattr(made, f.name)), f.name
