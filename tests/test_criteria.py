@@ -177,3 +177,55 @@ def test_status_text_and_layout_name_the_threshold():
           "pairs": [{"output": "p", "input": "da", "adequate_fraction": 0.65}],
           "criteria": {"min_coherence": 0.8, "max_random_error": 0.2, "required_fraction": 0.7}}
     assert "-5 points" in test_point_line(1, tp)
+
+
+@pytest.fixture(scope="module")
+def replays(tmp_path_factory):
+    """The shipped cruise aileron sweeps replayed with the packaged XV-15 map, once as it is and
+    once with ``[criteria] min_coherence = 0.8`` (one line), the strict one into an .rrd."""
+    import livesweep
+
+    tmp = tmp_path_factory.mktemp("criteria_live")
+    base = (ROOT / "src" / "livesweep" / "data" / "xv15_channels.toml").read_text()
+    strict_map = tmp / "strict.toml"
+    strict_map.write_text(base + "\n[criteria]\nmin_coherence = 0.8\n")
+    log = ROOT / "replay_logs" / "xv15_cruise_sweeps_da.mcap"
+    default = livesweep.replay(log, map=str(ROOT / "src" / "livesweep" / "data" / "xv15_channels.toml"))
+    strict = livesweep.replay(log, map=str(strict_map), rerun=tmp / "strict.rrd", record=tmp / "strict.mcap")
+    return default, strict, tmp
+
+
+@pytest.mark.slow
+def test_the_live_verdict_the_recording_and_the_rerun_legend_follow_one_criteria_line(replays):
+    from rerun.chunk import RrdReader
+
+    from livesweep.monitor.blueprint import coherence_path
+    from livesweep.monitor.session import recorded_settings
+
+    default, strict, tmp = replays
+    assert strict.settings.criteria == Criteria(min_coherence=0.8)
+    assert len(strict.test_points) == len(default.test_points) >= 1
+    lower = 0
+    for tp_s, tp_d in zip(strict.test_points, default.test_points):
+        assert tp_s["criteria"]["min_coherence"] == 0.8 and tp_d["criteria"]["min_coherence"] == 0.6
+        for p_s, p_d in zip(tp_s["pairs"], tp_d["pairs"]):
+            assert p_s["adequate_fraction"] <= p_d["adequate_fraction"] + 1e-12
+            lower += p_s["adequate_fraction"] < p_d["adequate_fraction"] - 1e-9
+    assert lower >= 1
+    # the recording keeps the criteria, so its replay judges the same way
+    assert recorded_settings(tmp / "strict.mcap").criteria == Criteria(min_coherence=0.8)
+    # Rerun: the threshold line sits at 0.8 and its legend says so
+    chunks = RrdReader(tmp / "strict.rrd").stream().to_chunks()
+    entity = "/" + coherence_path("p", "da") + "/threshold"
+    labels, strips = [], []
+    for c in chunks:
+        if c.entity_path != entity:
+            continue
+        rb = c.to_record_batch()
+        for name in rb.schema.names:
+            if name.endswith("LineStrips2D:labels"):
+                labels += rb.column(name).to_pylist()
+            if name.endswith("LineStrips2D:strips"):
+                strips += rb.column(name).to_pylist()
+    assert labels and all(v == ["γ² = 0.8"] for v in labels), labels
+    assert strips and all(abs(pt[1] - 0.8) < 1e-6 for s in strips for line in s for pt in line), strips[:1]

@@ -134,7 +134,7 @@ def fit_transfer_function(response, *, denominator: str, numerator: str = "", de
     delay : bool
         Fit a delay ``tau >= 0`` [s].
     band_rad_s : (float, float), optional
-        Fitting band [rad/s]; default the coherent band of the pair (gamma^2 >= 0.6).
+        Fitting band [rad/s]; default the coherent band of the pair (gamma^2 >= 0.6, the default criteria).
     name : str, optional
         Default ``"<output>/<input>"``.
     tau_max_s : float

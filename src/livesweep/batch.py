@@ -211,7 +211,7 @@ def summarize(ident) -> dict:
     -------
     dict
         ``pairs`` (number of frequency responses), ``band_rad_s`` (``{"out/in": [lo, hi] or None}``,
-        the widest band with gamma^2 >= 0.6 and eps_r <= 0.2), ``J`` (J_ave of the final
+        the widest adequate band by the case's criteria), ``J`` (J_ave of the final
         state-space model, the residual loop's when it added an effect; else the worst
         transfer-function cost, else None), ``TIC`` (the largest Theil inequality coefficient of
         that model over every verification record and output, or None) and ``residual`` (the

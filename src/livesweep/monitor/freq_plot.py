@@ -7,7 +7,7 @@ Rerun 2-D views (Rerun has no log axis). This module decides
   moved by a whole number of turns so its value at the lowest coherent frequency lies in
   (-180, 180] deg;
 * which stretches are drawn in colour and which grey (:func:`masked_runs`): a point is
-  *coherent* when gamma^2 >= the threshold (0.6); masked stretches are drawn grey and thin, and a
+  *coherent* when gamma^2 >= the criteria's threshold (0.6 by default); masked stretches are drawn grey and thin, and a
   masked point outside the plotted range is not drawn at all (it would fall on the labels);
 * the plotted range of a value axis (:func:`value_extent`): it follows the coherent data,
   shrinking as well as growing, with hysteresis so the grid does not move every estimate;

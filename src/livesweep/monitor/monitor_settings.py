@@ -13,6 +13,7 @@ from dataclasses import asdict, dataclass, replace
 
 from livesweep.errors import ConfigError, quote, require_number
 from livesweep.spectral import DEFAULT_WINDOW_S
+from livesweep.spectral.criteria import DEFAULT_CRITERIA, Criteria
 from livesweep.spectral.online import OnlineSpectralEstimator
 
 __all__ = ["MonitorSettings"]
@@ -62,6 +63,9 @@ class MonitorSettings:
     system : (int, int or None), optional
         The MAVLink system and component to analyse (``--sysid``, ``[map].sysid``); None: the first
         vehicle that sends every mapped message (:mod:`livesweep.telemetry.vehicle_choice`).
+    criteria : Criteria
+        What makes a response adequate and a test point GO (the map's ``[criteria]``): used by the
+        verdict, each test point's judgement, the view's threshold and the status text.
     """
 
     signals: dict
@@ -81,6 +85,7 @@ class MonitorSettings:
     map_name: str | None = None
     vehicle: dict | None = None
     system: tuple | None = None
+    criteria: Criteria = DEFAULT_CRITERIA
 
     def to_dict(self) -> dict:
         """Everything a replay needs to run as the live monitor did (the recording's settings attachment)."""
@@ -100,6 +105,7 @@ class MonitorSettings:
             "map_name": self.map_name,
             "vehicle": None if not self.vehicle else {k: list(v) for k, v in self.vehicle.items()},
             "system": None if self.system is None else list(self.system),
+            "criteria": self.criteria.to_dict(),
         }
 
     @classmethod
@@ -157,7 +163,7 @@ class MonitorSettings:
             segment_s=None if segment is None else require_number(segment, f"{where}: segment_s"),
             update_period_s=require_number(d.get("update_period_s", 0.2), f"{where}: update_period_s"),
             references=sp.references, test_points=m.test_points, map_name=map_name,
-            vehicle=dict(m.vehicle) or None, system=system,
+            vehicle=dict(m.vehicle) or None, system=system, criteria=m.criteria,
         ).check_limits(where)
         return replace(settings,
                        required_pairs=_saved_pairs(d.get("required_pairs"), sp, f"{where}: required_pairs"),
@@ -239,6 +245,8 @@ def _map_tables(d: dict) -> dict:
         tables["test_points"] = d["test_points"]
     if d.get("vehicle"):
         tables["map"] = {"vehicle": d["vehicle"]}
+    if d.get("criteria") is not None:
+        tables["criteria"] = d["criteria"]
     return tables
 
 

@@ -128,7 +128,7 @@ class MonitorPipeline(FrameIntake, EstimateStep, Verdicts, MapCheck, LinkReport,
                                                  **kw)
         self.excitation = ExcitationMonitor(settings.inputs, settings.outputs, settings.band_rad_s,
                                             settings.sample_rate_hz, saturation_limits=settings.saturation_limits,
-                                            required_pairs=settings.required_pairs)
+                                            required_pairs=settings.required_pairs, criteria=settings.criteria)
         self.test_points = tracker_for(settings, self.names)
         self.test_points.source_rates = self._source_rates
         self.test_points.link_counts = self._link_counts      # what the link lost while a test point is open

@@ -1,14 +1,14 @@
 """Drawing the frequency plots and coherence waterfalls of the Rerun view.
 
 Per pair (entity paths: :mod:`.blueprint`), all three plots against ``log10 omega`` with ticks at
-the 1-2-5 values labelled in rad/s: coherence gamma^2 (line and points, 0..1, the threshold 0.6 as
+the 1-2-5 values labelled in rad/s: coherence gamma^2 (line and points, 0..1, the criteria's threshold, 0.6 by default, as
 an orange line), |H| [dB] and phase [deg]. Rerun has no log axis, so each is a
 ``rr.LineStrips2D`` whose points are ``(log10 omega, value)`` in a Spatial2DView with fixed visual
 bounds; a ``rr.Transform3D`` on the entity maps the plotted range onto the view's box (y up) and
 is logged again, at the estimate's time, whenever that range changes; the grid and its labels are
 a child entity, so they get the same transform.
 
-*Masking*: where gamma^2 < 0.6 the curves are drawn **grey and thin** on all three plots (and the
+*Masking*: where gamma^2 is below the threshold the curves are drawn **grey and thin** on all three plots (and the
 coherence points grey); a masked magnitude or phase point outside the plotted range is not drawn.
 The plotted range follows the coherent points (:func:`.freq_plot.value_extent`: it grows at once
 and shrinks when it is more than 1.6 times what the data need).
@@ -42,7 +42,6 @@ from livesweep.monitor.freq_plot import (
     MAG_STEPS_DB, PHASE_STEPS_DEG, frequency_extent, log_ticks, masked_runs, reference_phase, tick_label,
     value_extent,
 )
-from livesweep.spectral.adequacy import MIN_COHERENCE
 
 __all__ = ["ArrowBatch", "FrequencyPlots", "PairState", "descriptors"]
 
@@ -135,8 +134,10 @@ class FrequencyPlots:
         Builds the Arrow arrays of tensors, strips and points (:func:`.rerun_compat.arrays`).
     """
 
-    def __init__(self, rec, n_columns: int, waterfall_rows: int, waterfall_every: int, arrays) -> None:
+    def __init__(self, rec, n_columns: int, waterfall_rows: int, waterfall_every: int, arrays, *,
+                 min_coherence: float) -> None:
         self.rec, self.n_columns, self.arrays = rec, int(n_columns), arrays
+        self.min_coherence = float(min_coherence)          # the criteria's: grey below it, its line drawn
         self.waterfall_rows, self.waterfall_every = int(waterfall_rows), int(waterfall_every)
         self.pairs: dict[tuple[str, str], PairState] = {}
         self._grid_cache: tuple[bytes, dict] | None = None
@@ -185,7 +186,7 @@ class FrequencyPlots:
             ``"ordinary"`` or ``"partial"``.
         """
         g = self.grid_batches(w)
-        coherent = np.isfinite(coh) & (coh >= MIN_COHERENCE)
+        coherent = np.isfinite(coh) & (coh >= self.min_coherence)
         pha = reference_phase(pha, coherent)
         wf_pct = None
         if self.waterfall_rows:
@@ -292,8 +293,8 @@ class FrequencyPlots:
                                  colors=[_GRID_COLOR], draw_order=6.0))
         if plot.kind == "coherence":
             self.rec.log(f"{plot.path}/threshold",
-                         rr.LineStrips2D([[[x0, MIN_COHERENCE], [x1, MIN_COHERENCE]]], colors=[_THRESHOLD_COLOR],
-                                         radii=rr.Radius.ui_points(1.0), labels=[f"γ² = {MIN_COHERENCE:g}"],
+                         rr.LineStrips2D([[[x0, self.min_coherence], [x1, self.min_coherence]]], colors=[_THRESHOLD_COLOR],
+                                         radii=rr.Radius.ui_points(1.0), labels=[f"γ² = {self.min_coherence:g}"],
                                          show_labels=False, draw_order=15.0))
 
     def _log_curve(self, plot: _Plot, logw: np.ndarray, y: np.ndarray, coherent: np.ndarray,

@@ -8,7 +8,7 @@ What the engineer sees, and how each item is represented (entity paths: :mod:`.b
   so the time axis reads as the UTC clock rather than 20 000 days). The legend names carry the
   units (``"da [deg]"``).
 * **Frequency plots** per pair (coherence, |H| [dB] and phase [deg] against ``log10 omega``, grey
-  and thin where gamma^2 < 0.6) and the **coherence waterfall** per pair: drawn by
+  and thin where gamma^2 is below the criteria's threshold) and the **coherence waterfall** per pair: drawn by
   :mod:`.rerun_plots`, which describes them.
 * **Status**: a markdown ``rr.TextDocument`` (verdict, which coherence was judged, the sweep
   frequency and time still needed per input, the reasons, and the adequacy table with
@@ -52,7 +52,7 @@ from livesweep.monitor.freq_plot import frequency_extent, reference_phase
 from livesweep.monitor.rerun_plots import ArrowBatch, FrequencyPlots, PairState, descriptors
 from livesweep.monitor.rerun_server import WebViewerServer, find_rerun_cli, serve_banner
 from livesweep.monitor.text import EPOCH_MIN_S, adequacy_markdown, coherence_kind_text, markdown_test_points
-from livesweep.spectral.adequacy import MIN_COHERENCE
+from livesweep.spectral.criteria import DEFAULT_CRITERIA
 
 __all__ = ["RerunView", "find_rerun_cli", "series_label", "adequacy_markdown", "serve_banner"]
 
@@ -98,6 +98,9 @@ class RerunView:
         Upper bound for :meth:`flush` (an unreachable gRPC sink must not hang shutdown).
     test_point_history : int
         Closed test points kept in the test-point document (the oldest drop out).
+    min_coherence : float
+        The criteria's coherence threshold: the line and legend on the coherence plots, grey below
+        it, and the status text (the settings' ``criteria``).
 
     With no sink at all the data goes to an in-memory recording, :attr:`memory`
     (``rr.MemoryRecording``; drain it or it grows).
@@ -107,7 +110,7 @@ class RerunView:
                  recording_id: str | None = None, save_path: str | os.PathLike | None = None, spawn: bool = False,
                  serve: bool = False, bind_host: str = "127.0.0.1", grpc_port: int = 9876, web_port: int = 9090,
                  waterfall_rows: int = 30, waterfall_every: int = 1, flush_timeout_s: float = 10.0,
-                 test_point_history: int = 50) -> None:
+                 test_point_history: int = 50, min_coherence: float = DEFAULT_CRITERIA.min_coherence) -> None:
         self.inputs, self.outputs = list(inputs), list(outputs)
         check_names(self.inputs, self.outputs)
         if spawn and serve:
@@ -118,7 +121,8 @@ class RerunView:
         self.waterfall_rows, self.waterfall_every = int(waterfall_rows), int(waterfall_every)
         self.flush_timeout_s = float(flush_timeout_s)
         self.test_point_history = max(0, int(test_point_history))
-        self.blueprint = default_blueprint(self.inputs, self.outputs)
+        self.min_coherence = float(min_coherence)
+        self.blueprint = default_blueprint(self.inputs, self.outputs, min_coherence=self.min_coherence)
         self.save_path = None if save_path is None else Path(save_path)
         self.web_url: str | None = None
         self.grpc_url: str | None = None
@@ -168,7 +172,7 @@ class RerunView:
         # the frequency plots (their descriptors are built here, paying Rerun's one-off lazy
         # initialisation, ~100 ms, before the first estimate) and the time series' descriptor
         self._plots = FrequencyPlots(self.rec, len(self.inputs), self.waterfall_rows, self.waterfall_every,
-                                     rerun_compat.arrays())
+                                     rerun_compat.arrays(), min_coherence=self.min_coherence)
         self._d_scalars = descriptors(rr.Scalars([0.0]))["Scalars:scalars"]
 
         for name in self.inputs:
@@ -341,7 +345,7 @@ class RerunView:
             self._status = {"rows": list(adequacy_rows), "coherence_kind": coherence_kind, "sweep": sweep}
             rec.log(ADEQUACY_PATH, rr.TextDocument(
                 adequacy_markdown(t_s, adequacy_rows, verdict, reasons, coherence_kind=coherence_kind, sweep=sweep,
-                                  lag_s=lag_s),
+                                  lag_s=lag_s, min_coherence=self.min_coherence),
                 media_type=rr.MediaType.MARKDOWN))
 
     def log_verdict(self, t_s: float, verdict: str, reasons: Sequence[str]) -> None:
@@ -356,7 +360,7 @@ class RerunView:
             sweep = {k: (None, None) for k in (st["sweep"] or {})}     # no sweep is tracked without samples
             self.rec.log(ADEQUACY_PATH, rr.TextDocument(
                 adequacy_markdown(t_s, st["rows"], verdict, reasons, coherence_kind=st["coherence_kind"],
-                                  sweep=sweep), media_type=rr.MediaType.MARKDOWN))
+                                  sweep=sweep, min_coherence=self.min_coherence), media_type=rr.MediaType.MARKDOWN))
 
     def log_focus(self, t_s: float, response, title: str) -> None:
         """The swept pair of a test point as its verdict judged it, over the judged band (the "Test
@@ -372,7 +376,7 @@ class RerunView:
             self._set_time(t_s)
             c = np.asarray(response.coherence, float)
             H = np.asarray(response.H, complex)
-            ok = np.isfinite(c) & (c >= MIN_COHERENCE)
+            ok = np.isfinite(c) & (c >= self.min_coherence)
             with np.errstate(divide="ignore", invalid="ignore"):
                 mag = 20.0 * np.log10(np.abs(H))
             pha = reference_phase(np.degrees(np.angle(H)), ok)

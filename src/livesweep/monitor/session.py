@@ -175,7 +175,8 @@ def _view(rerun, settings, name: str = "replay"):
 
         options = dict(rerun) if isinstance(rerun, dict) else {"save_path": None if rerun is True else rerun,
                                                                "spawn": rerun is True}
-        return RerunView(list(settings.inputs), list(settings.outputs), **{"recording_id": name, **options})
+        return RerunView(list(settings.inputs), list(settings.outputs),
+                         **{"recording_id": name, "min_coherence": settings.criteria.min_coherence, **options})
     return rerun
 
 

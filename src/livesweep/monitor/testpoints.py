@@ -56,6 +56,7 @@ import numpy as np
 from livesweep.monitor.systemid import SAME_START_S, SystemIdWatch, better_injection
 from livesweep.monitor.systemid import TOPICS as SYSTEMID_TOPICS
 from livesweep.monitor.vehicle import VehicleInfo, axis_name
+from livesweep.spectral.criteria import DEFAULT_CRITERIA, Criteria
 from livesweep.spectral.injection import SweepInjection
 from livesweep.spectral.verdict import DataLoss, TestPointJudgement, judge_test_point
 from livesweep.telemetry.frames import Frame
@@ -160,6 +161,7 @@ class TestPoint:
     next_judge_s: float = math.inf               # data time of its next judgement while open
     judgement: TestPointJudgement | None = None
     running: TestPointJudgement | None = None    # the last running judgement
+    criteria: Criteria = DEFAULT_CRITERIA        # what judges it (the map's [criteria])
 
     def samples(self) -> tuple[np.ndarray, np.ndarray]:
         """Its samples so far, (values (n_signals, n), valid (n,))."""
@@ -187,7 +189,7 @@ class TestPoint:
                "axis": self.axis, "verdict": "WAIT", "label": "WAIT", "marginal": False,
                "running": None if self.running is None else self.running.label,
                "injection": None if self.injection is None else self.injection.to_dict(),
-               "pairs": [], "missing": [], "reasons": []}
+               "pairs": [], "missing": [], "reasons": [], "criteria": self.criteria.to_dict()}
         if state == "closed":
             out["verdict"] = out["label"] = "NO-GO" if j is None or self.lost or self.unjudged else j.verdict
         if j is not None:
@@ -327,17 +329,21 @@ class TestPointTracker:
         ``link_counts() -> {counter: cumulative count}``: the live link's loss counters
         (``kernel_drops``, ``seq_gaps``, ``analysis_shed``, ``received``), read when a test point
         opens and when it is judged; None for a file.
+    criteria : Criteria
+        What judges each test point and is recorded with it (the map's ``[criteria]``).
     """
 
     def __init__(self, names, inputs, outputs, sample_rate_hz: float, band_rad_s, *, sources=SOURCES,
                  axes: dict | None = None, required: dict | None = None, min_duration_s: float = 10.0,
-                 references: dict | None = None, source_rates=None, link_counts=None):
+                 references: dict | None = None, source_rates=None, link_counts=None,
+                 criteria: Criteria = DEFAULT_CRITERIA):
         self.names, self.inputs, self.outputs = tuple(names), tuple(inputs), tuple(outputs)
         self.fs, self.band = float(sample_rate_hz), (float(band_rad_s[0]), float(band_rad_s[1]))
         self.sources = tuple(sources)
         self.axes = {int(k): v for k, v in (axes or {}).items()}
         self.required = {i: tuple(v) for i, v in (required or {}).items()}
         self.min_duration_s = float(min_duration_s)
+        self.criteria = criteria
         self.references = dict(references or {})     # input -> its logged injection
         self.source_rates = source_rates
         self.link_counts = link_counts
@@ -493,6 +499,7 @@ class TestPointTracker:
 
     def _open(self, ev: TestPointEvent) -> list[tuple[float, dict]]:
         tp = TestPoint(ev.t_s, ev.source, ev.swept_input, ev.note, injection=ev.injection, axis=ev.axis,
+                       criteria=self.criteria,
                        unjudged=self._unjudged(ev))
         before = []
         for t0, values, valid, raw in self._pre:      # split the recent samples at the start
@@ -622,6 +629,7 @@ class TestPointTracker:
         j = judge_test_point(values, self.names, self.fs, swept, outputs, self.band,
                              valid=valid, references=self.references, injection=tp.injection,
                              elapsed_s=last - tp.start_s, final=final, min_duration_s=self.min_duration_s,
+                             criteria=self.criteria,
                              source_rates_hz=rates, loss=self._loss(tp, (swept, self.references.get(swept), *outputs),
                                                                     valid, last, rates))
         if final:

@@ -8,6 +8,7 @@ the sliding window. :func:`tracker_for` makes the tracker a settings object asks
 
 from __future__ import annotations
 
+from livesweep.config import TestPointSettings
 from livesweep.monitor.monitor_settings import MonitorSettings
 from livesweep.monitor.testpoints import SOURCES, TestPointTracker
 from livesweep.monitor.text import time_text
@@ -27,8 +28,9 @@ def tracker_for(settings: MonitorSettings, names) -> TestPointTracker:
     refs = dict(zip(settings.inputs, settings.references)) if settings.references else None
     return TestPointTracker(names, settings.inputs, settings.outputs, settings.sample_rate_hz, settings.band_rad_s,
                             sources=tp.sources if tp is not None else SOURCES, axes=tp.axes if tp is not None else None,
-                            required=required, min_duration_s=tp.min_duration_s if tp is not None else 10.0,
-                            references=refs)
+                            required=required,
+                            min_duration_s=(tp if tp is not None else TestPointSettings()).min_duration_s,
+                            references=refs, criteria=settings.criteria)
 
 
 class Verdicts:

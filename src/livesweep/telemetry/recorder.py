@@ -122,7 +122,10 @@ RESULT_SCHEMAS: dict[str, dict] = {
                               "description": "fraction of its frames lost over its span, 0..1: the worst of its "
                                              "signals' frames missing from their time stamps and its grid samples "
                                              "in gaps (the first reason from 0.136; a NO-GO from 0.225 is labelled "
-                                             "NO-GO (link))"},
+                                             "NO-GO (link)), with the method's criteria"},
+            "criteria": {"type": "object", "description": "the criteria that judged it (the map's [criteria])",
+                         "properties": {"min_coherence": {"type": "number"}, "max_random_error": {"type": "number"},
+                                        "required_fraction": {"type": "number"}}},
         },
         "required": ["start_s", "end_s", "source", "swept_input", "verdict", "pairs", "missing"],
     },
