@@ -63,12 +63,39 @@ def _replay_test_points(log, map_name=None):
     return points
 
 
+def _preparation(case: Path) -> list[list[str]]:
+    """The ``livesweep convert`` / ``livesweep sim`` commands a case's header comment says to run
+    first (its logs are not committed), as argument lists."""
+    commands, current = [], ""
+    for line in case.read_text().splitlines():
+        if not line.startswith("#"):
+            break
+        text = line.lstrip("#").strip()
+        if current or text.startswith("livesweep "):
+            current += " " + text.rstrip("\\").strip()
+            if not text.endswith("\\"):
+                if not current.split()[1] == "identify":
+                    commands.append(current.split())
+                current = ""
+    return commands
+
+
 def snapshot(out: Path) -> None:
+    """Identify every shipped case (after the commands its header asks for, run in a scratch copy
+    of config/ and replay_logs/) and replay every shipped log."""
+    import shutil
+
     out.mkdir(parents=True, exist_ok=True)
+    scratch = Path(tempfile.mkdtemp())
+    for d in ("config", "replay_logs"):
+        shutil.copytree(ROOT / d, scratch / d)
     for case in shipped_cases():
+        for cmd in _preparation(case):
+            args = [a.replace("../shared/data", str(ROOT.parent / "shared" / "data")) for a in cmd[1:]]
+            subprocess.run([sys.executable, "-m", "livesweep", *args], cwd=scratch, capture_output=True, text=True)
         dest = out / "cases" / case.stem
-        run = subprocess.run([sys.executable, "-m", "livesweep", "identify", str(case), "--out", str(dest),
-                              "--no-plots"], capture_output=True, text=True)
+        run = subprocess.run([sys.executable, "-m", "livesweep", "identify", str(scratch / "config" / case.name),
+                              "--out", str(dest), "--no-plots"], capture_output=True, text=True)
         status = "ok" if run.returncode == 0 else f"exit {run.returncode}: {run.stderr.strip()[-300:]}"
         print(f"identify {case.name}: {status}", flush=True)
     logs = [(p, None) for p in sorted((ROOT / "replay_logs").glob("*.mcap"))]

@@ -14,7 +14,7 @@ each required pair is adequate over 60 % of the band (in decades).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -84,15 +84,14 @@ class Criteria:
         return f"gamma^2 >= {self.min_coherence:g}, eps <= {self.max_random_error:g}"
 
     def to_dict(self) -> dict:
-        """The criteria as recorded in report.json and on ``/livesweep/test_point``."""
-        return {"min_coherence": self.min_coherence, "max_random_error": self.max_random_error,
-                "required_fraction": self.required_fraction}
+        """The criteria as recorded in report.json and on ``/livesweep/test_point`` (every field)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
 
     @classmethod
     def from_dict(cls, d) -> Criteria:
-        """The criteria of :meth:`to_dict` (missing keys: the defaults)."""
+        """The criteria of :meth:`to_dict` (missing keys: the defaults; unknown keys ignored)."""
         d = d or {}
-        return cls(**{k: float(d[k]) for k in ("min_coherence", "max_random_error", "required_fraction") if k in d})
+        return cls(**{f.name: float(d[f.name]) for f in fields(cls) if f.name in d})
 
 
 #: The method's criteria (docs/method.md §2.5).
