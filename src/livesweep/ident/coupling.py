@@ -22,6 +22,7 @@ from livesweep.effects.derivative import derivative_slots
 from livesweep.effects.table import add_entry, normalised, restart_from
 from livesweep.errors import ConfigError
 from livesweep.ident.accuracy import MAX_COST_AVERAGE, guideline_failures, parameter_report
+from livesweep.ident.cost import MIN_COHERENCE
 from livesweep.ident.residual_space import model_misfit
 from livesweep.ident.state_space import StateSpaceFit, StateSpaceModel, refit_state_space, select_pairs
 
@@ -91,7 +92,7 @@ def _candidate_table(table, where, name):
 
 
 def find_coupling(table: dict, origin: dict, fit: StateSpaceFit, frs, skipped, *, n_omega: int,
-                  progress=None) -> Coupling | None:
+                  progress=None, min_coherence: float = MIN_COHERENCE) -> Coupling | None:
     """The entry that best gives the no-path pairs of ``skipped`` a path, or None.
 
     Parameters
@@ -107,6 +108,8 @@ def find_coupling(table: dict, origin: dict, fit: StateSpaceFit, frs, skipped, *
     n_omega : int
         Fitting points per pair.
     progress : callable, optional
+    min_coherence : float
+        The fit bands' coherence threshold (the case's criteria).
     """
     targets = no_path_pairs(skipped)
     if not targets:
@@ -122,7 +125,7 @@ def find_coupling(table: dict, origin: dict, fit: StateSpaceFit, frs, skipped, *
             th = np.array(m.initial, float)
             th[k] = 1.0
             probe = m.with_values(th)
-            pairs, _ = select_pairs(frs, probe, n_omega=n_omega)
+            pairs, _ = select_pairs(frs, probe, n_omega=n_omega, min_coherence=min_coherence)
         except (ConfigError, np.linalg.LinAlgError, ValueError) as exc:
             tried.append({"where": where, "cost_after": None, "reason": f"could not build the model: {exc}"})
             continue

@@ -49,6 +49,7 @@ import numpy as np
 from livesweep.effects import Candidate
 from livesweep.errors import ConfigError
 from livesweep.ident import residual_dicts as _dicts
+from livesweep.ident.cost import MIN_COHERENCE
 from livesweep.ident.coupling import find_coupling, no_path_pairs
 from livesweep.ident.residual_backward import HistoryEntry, backward_step, rechoose
 from livesweep.ident.residual_choice import PARTIAL, decide
@@ -82,7 +83,7 @@ _choose, _rivals, _partners_needed, _backward = _dicts.choose, _dicts.rivals, _d
 
 def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_steps: int = 3,
                       n_refit: int = 3, false_alarm: float = FALSE_ALARM, n_omega: int = N_OMEGA_LOOP,
-                      kinds=KINDS, progress=None) -> ResidualLoop:
+                      kinds=KINDS, progress=None, min_coherence: float = MIN_COHERENCE) -> ResidualLoop:
     """Diagnose, augment, re-identify, repeat (see the module docstring).
 
     Parameters
@@ -114,10 +115,12 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
         Catalogue entries to consider (default all of :data:`KINDS`).
     progress : callable, optional
         ``progress(str)`` for long steps.
+    min_coherence : float
+        The fit bands' coherence threshold (the case's criteria), as the state-space stage used.
     """
     if not (0.0 < float(false_alarm) < 1.0):
         raise ConfigError(f"residual loop: false_alarm = {false_alarm!r} must be between 0 and 1")
-    pairs, skipped = select_pairs(frs, fit.model, n_omega=n_omega)
+    pairs, skipped = select_pairs(frs, fit.model, n_omega=n_omega, min_coherence=min_coherence)
     if not pairs:
         raise ConfigError("residual loop: no pair of the model has usable coherence")
     fit = fit_state_space(fit.model.with_values(fit.theta), pairs)
@@ -125,7 +128,7 @@ def run_residual_loop(table: dict, fit: StateSpaceFit, frs, *, verify=None, max_
     steps, n_fits, ver = [], 1, None
     if max_steps > 0 and no_path_pairs(skipped):
         # coherent pairs the model has no path for: no residual in dB, so no screen sees them
-        paths = _give_paths(table, origin, fit, frs, skipped, pairs, verify, n_omega, progress)
+        paths = _give_paths(table, origin, fit, frs, skipped, pairs, verify, n_omega, progress, min_coherence)
         n_fits += paths.n_fits
         if paths.step is not None:
             steps.append(paths.step)
@@ -184,14 +187,15 @@ class _Paths:
     verification: object = None
 
 
-def _give_paths(table, origin, fit, frs, skipped, pairs, verify, n_omega, progress) -> _Paths:
+def _give_paths(table, origin, fit, frs, skipped, pairs, verify, n_omega, progress, min_coherence) -> _Paths:
     """Give the coherent pairs the model has no path for one
     (:func:`~livesweep.ident.coupling.find_coupling`), as the loop's first step."""
-    coupling = find_coupling(table, origin, fit, frs, skipped, n_omega=n_omega, progress=progress)
+    coupling = find_coupling(table, origin, fit, frs, skipped, n_omega=n_omega, progress=progress,
+                             min_coherence=min_coherence)
     if coupling is None:
         return _Paths(1)
     old_pairs, before = pairs, tuple(pair_residuals(fit.model, fit.theta, pairs, frs))
-    pairs, _ = select_pairs(frs, coupling.fit.model, n_omega=n_omega)
+    pairs, _ = select_pairs(frs, coupling.fit.model, n_omega=n_omega, min_coherence=min_coherence)
     cost_before, ver_before = fit.cost_average, verify(fit.model, fit.theta) if verify else None
     fit, origin = coupling.fit, coupling.table
     effect = EffectRecord("missing_derivative", coupling.where, (coupling.parameter,),

@@ -123,7 +123,8 @@ def run_residual_stage(case: Case, frs: FrequencyResponseSet, ss, *, runner=None
 
     loop = run_residual_loop(case.tables["state_space"], ss.fit, frs, verify=verify if runner else None,
                              max_steps=settings.max_steps, kinds=list(settings.kinds),
-                             false_alarm=settings.false_alarm, progress=progress)
+                             false_alarm=settings.false_alarm, progress=progress,
+                             min_coherence=case.criteria.min_coherence)
     if not loop.added:
         return ResidualStage(loop, settings)
     after = tuple(runner(loop.fit.model, loop.fit.theta)) if runner is not None else ()
