@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "data" / "ardupilot_sitl_systemid"
 IGNORED = {"wall_s", "elapsed_s", "seconds", "version", "livesweep_version", "created", "path", "log", "out",
            "case_file", "generated", "python", "numpy", "scipy", "timings", "wall_time_s", "cpu_s", "host",
-           "recording", "files", "output", "report_html", "plots"}
+           "recording", "files", "output", "report_html", "plots", "generated_utc"}
 
 
 def shipped_cases():
