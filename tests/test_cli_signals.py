@@ -41,9 +41,9 @@ def big_csv(tmp_path_factory):
 
 
 def _convert(args, out: Path, *, ignore=()):
-    def setup():                      # as nohup leaves it: ignored before livesweep starts
-        for sig in ignore:
-            signal.signal(sig, signal.SIG_IGN)
+    def setup():                      # a plain start (whatever the test runner inherited), or as nohup leaves it
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            signal.signal(sig, signal.SIG_IGN if sig in ignore else signal.SIG_DFL)
 
     return subprocess.Popen([sys.executable, "-m", "livesweep", "convert", *map(str, args), "--out", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=setup)
