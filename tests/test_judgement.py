@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from livesweep.spectral.criteria import Criteria
 from livesweep.spectral.injection import SweepInjection, ardupilot_chirp
 from livesweep.spectral.verdict import coherence_sigma, judge_test_point
 
@@ -57,14 +58,14 @@ def test_the_adequate_fraction_brackets_the_true_one_and_a_threshold_inside_the_
     for seed in range(200, 208):
         values = _record(seed)
         j = judge_test_point(values, ["u", "y"], FS, "u", ["y"], BAND, injection=EVERYTHING_SWEPT, elapsed_s=1e3,
-                             required_fraction=TRUE_FRACTION)
+                             criteria=Criteria(required_fraction=TRUE_FRACTION))
         (p,) = j.pairs
         assert p.adequate_fraction == pytest.approx(TRUE_FRACTION, abs=0.06)
         lo, hi = p.adequate_range
         held += lo <= TRUE_FRACTION <= hi
         marginal_at_truth += j.marginal
         far = judge_test_point(values, ["u", "y"], FS, "u", ["y"], BAND, injection=EVERYTHING_SWEPT, elapsed_s=1e3,
-                               required_fraction=TRUE_FRACTION - 0.3)
+                               criteria=Criteria(required_fraction=TRUE_FRACTION - 0.3))
         assert far.verdict == "GO" and not far.marginal and far.label == "GO"
         marginal_far += far.marginal
     # a one-sigma bracket holds the truth 68 % of the time: at least 4 of 8 at the binomial 5 % level
@@ -74,7 +75,7 @@ def test_the_adequate_fraction_brackets_the_true_one_and_a_threshold_inside_the_
 
 def test_each_rule_says_its_distance_from_the_threshold():
     j = judge_test_point(_record(0), ["u", "y"], FS, "u", ["y"], BAND, injection=EVERYTHING_SWEPT, elapsed_s=1e3,
-                         required_fraction=0.3)
+                         criteria=Criteria(required_fraction=0.3))
     (p,) = j.pairs
     pair_line = next(r for r in j.reasons if r.startswith("y/u:"))
     assert f"{100 * (p.adequate_fraction - 0.3):+.0f} points" in pair_line and "within the random error" in pair_line
@@ -88,7 +89,7 @@ def test_a_running_verdict_judges_the_band_swept_so_far_and_says_how_much():
     elapsed = 1.0 + 4.0 + 18.0
     w_now = inj.swept_band(elapsed)[1]
     j = judge_test_point(_record(1, 60.0), ["u", "y"], FS, "u", ["y"], BAND, injection=inj, elapsed_s=elapsed,
-                         final=False, required_fraction=0.3)
+                         final=False, criteria=Criteria(required_fraction=0.3))
     assert not j.final and j.band_rad_s == pytest.approx(inj.band_rad_s)
     assert j.swept_rad_s == pytest.approx((math.pi, w_now))
     assert j.label == f"{j.verdict} so far"

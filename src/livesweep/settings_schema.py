@@ -26,8 +26,8 @@ from typing import Any
 
 from livesweep.errors import ConfigError, quote
 
-__all__ = ["setting", "Check", "number", "integer", "string", "names", "numbers", "choices", "band", "read_table",
-           "table_keys", "markdown_table", "write_docs", "default_of"]
+__all__ = ["setting", "Check", "number", "integer", "string", "names", "numbers", "choices", "read_table",
+           "table_keys", "markdown_table", "write_docs"]
 
 
 @dataclass(frozen=True)
@@ -170,20 +170,6 @@ def choices(options: tuple[str, ...]) -> Check:
     return Check(convert, "array of " + ", ".join(f"`\"{o}\"`" for o in options))
 
 
-def band() -> Check:
-    """``[low, high]`` [rad/s] with ``0 < low < high`` (the Nyquist limit is the table's check)."""
-
-    def convert(value):
-        if not isinstance(value, list) or len(value) != 2:
-            raise ValueError("must be [low, high] in rad/s")
-        lo, hi = (_finite(v) for v in value)
-        if not 0.0 < lo < hi:
-            raise ValueError("must be [low, high] with 0 < low < high")
-        return (lo, hi)
-
-    return Check(convert, "`[low, high]`")
-
-
 def setting(default: Any = MISSING, check: Check | None = None, doc: str = "", *, units: str = "—",
             default_text: str | None = None, factory: Callable[[], Any] | None = None, key: bool = True):
     """A dataclass field that is a key of a settings table.
@@ -219,12 +205,6 @@ def _keyed(cls) -> list[dataclasses.Field]:
 def table_keys(cls) -> tuple[str, ...]:
     """The TOML keys the table of ``cls`` accepts, in declaration order."""
     return tuple(f.name for f in _keyed(cls))
-
-
-def default_of(cls, name: str) -> Any:
-    """The default of field ``name`` of ``cls`` (the one place it is defined)."""
-    f = next(f for f in dataclasses.fields(cls) if f.name == name)
-    return f.default_factory() if f.default is MISSING and f.default_factory is not MISSING else f.default
 
 
 def read_table(raw: Any, cls, where: str, origin: Any) -> dict[str, Any]:

@@ -14,6 +14,7 @@ import html
 import math
 
 from livesweep.report.summary import GUIDELINES, cr_text, guidelines, modes, report_criteria, stage_summary
+from livesweep.spectral.criteria import DEFAULT_CRITERIA
 
 __all__ = ["render"]
 
@@ -479,7 +480,9 @@ modes are shown, not flagged: many airframes are unstable without their flight c
 def _appendix(report: dict) -> str:
     """The method appendix, stating the criteria that judged this report."""
     c = report_criteria(report)
-    source = "" if c == report_criteria({}) else " (this case's [criteria]; the method's are γ² ≥ 0.6 and ε<sub>r</sub> ≤ 0.2)"
+    m = DEFAULT_CRITERIA
+    source = "" if c == m else (f" (this case's [criteria]; the method's are γ² ≥ {m.min_coherence:g} and "
+                                f"ε<sub>r</sub> ≤ {m.max_random_error:g})")
     return (_APPENDIX.replace("{min_coherence:g}", f"{c.min_coherence:g}")
             .replace("{max_random_error:g}", f"{c.max_random_error:g}").replace("{criteria_source}", source))
 

@@ -362,8 +362,6 @@ class ExcitationMonitor:
         Pairs that must be adequate for GO. Default: the on-axis pairs ``(outputs[k], inputs[k])``
         for ``k < min(len(outputs), len(inputs))`` -- list the outputs in the order of their
         on-axis inputs (e.g. inputs ``da, dr`` and outputs ``p, r, ...``) or pass the pairs.
-    required_fraction : float, optional
-        Fraction of the band (log frequency) each required pair must cover; default the criteria's.
     saturation_limits : dict of input -> (lo, hi), optional
         Travel limits (input units); a new sample at or beyond one (within ``saturation_margin``
         of the range) raises a ``saturation`` alert.
@@ -404,7 +402,7 @@ class ExcitationMonitor:
     """
 
     def __init__(self, inputs, outputs, band_rad_s, sample_rate_hz: float, *, required_pairs=None,
-                 required_fraction: float | None = None, saturation_limits: dict | None = None,
+                 saturation_limits: dict | None = None,
                  collapse_drop: float = 0.3, max_input_coherence: float = 0.5, min_n_eff: float = 3.0,
                  conditioned: bool = False, coverage_drop_db: float = 20.0,
                  collapse_lookback_s: float | None = None, history_s: float | None = None, fit_s: float = 20.0,
@@ -425,7 +423,7 @@ class ExcitationMonitor:
                 raise ConfigError(f"required pair {o}/{i} is not an output/input pair of "
                                   f"outputs {list(self.outputs)}, inputs {list(self.inputs)}")
         self.criteria = criteria
-        self.required_fraction = float(criteria.required_fraction if required_fraction is None else required_fraction)
+        self.required_fraction = float(criteria.required_fraction)
         self.saturation_limits = {}
         for k, v in (saturation_limits or {}).items():
             if k not in self.inputs:

@@ -504,7 +504,7 @@ def _pair(analysis, ref, o: str, swept: str, lo: float, hi: float, kind: str,
 def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_input: str, outputs, band_rad_s, *,
                      valid: np.ndarray | None = None, references: dict | None = None,
                      injection: SweepInjection | None = None, elapsed_s: float | None = None, final: bool = True,
-                     required_fraction: float | None = None, min_duration_s: float = 10.0,
+                     min_duration_s: float = 10.0,
                      source_rates_hz: dict | None = None, loss: DataLoss | None = None,
                      criteria: Criteria = DEFAULT_CRITERIA) -> TestPointJudgement:
     """The verdict on a test point from its aligned samples.
@@ -533,8 +533,6 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
     final : bool
         True: the closing verdict, over the whole judged band. False: a running verdict, over the
         band swept so far.
-    required_fraction : float, optional
-        Fraction of the band a required pair must cover; default the criteria's.
     min_duration_s : float
         A test point shorter than this [s] is not analysed.
     source_rates_hz : dict of str -> float, optional
@@ -552,8 +550,7 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
     -------
     TestPointJudgement
     """
-    if required_fraction is None:
-        required_fraction = criteria.required_fraction
+    required_fraction = criteria.required_fraction
     values = np.atleast_2d(np.asarray(values, float))
     names = list(names)
     n = values.shape[1]
