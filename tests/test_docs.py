@@ -98,6 +98,8 @@ def _case_file_tables() -> dict[str, set]:
         "Top-level tables of a channel map": set(config.MAP_KEYS),
         "`[map]`": set(config._MAP_TABLE_KEYS),
         "`[test_points]`": set(config._TEST_POINT_KEYS),
+        "`[predictions.<name>]`": set(config.table_keys(config.Prediction)),
+        "`[limits]`": set(config.table_keys(config.EnvelopeLimits)),
         "Top-level keys of a column map": set(table._MAP_KEYS),
         "`[columns.<name>]`": set(table._COLUMN_KEYS),
     }

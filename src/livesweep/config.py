@@ -34,6 +34,7 @@ from typing import Any
 
 from livesweep import limits
 from livesweep.errors import ConfigError, check_band, quote
+from livesweep.ident.envelope import NO_LIMITS, EnvelopeLimits, ModelSettings, Prediction
 from livesweep.settings import (TEST_POINT_SOURCES, Case, ChannelMap, Criteria, RecordSpec, SignalSpec,
                                 SpectralSettings, TestPointSettings)
 from livesweep.settings_schema import read_table, table_keys
@@ -64,14 +65,14 @@ _UNREAD_TABLES = {
     "verification": "time-domain verification runs on the [[verify]] records and has no settings",
 }
 #: Every top-level key a case file may hold.
-CASE_KEYS = ("case", "identify", "verify", "signals", "spectral", "criteria") + RAW_TABLE_KEYS
+CASE_KEYS = ("case", "identify", "verify", "signals", "spectral", "criteria", "predictions", "limits") + RAW_TABLE_KEYS
 
 _CASE_TABLE_KEYS = table_keys(Case)
 _RECORD_KEYS = table_keys(RecordSpec)
 _SIGNAL_KEYS = ("topic", "field", "stamp", "stamp_topic", "stamp_scale", "scale", "offset", "units", "sysid", "compid",
                 "where")
 #: Top-level tables of a channel map (a case file's keys are accepted too: ``--case`` takes one).
-MAP_KEYS = ("map", "signals", "spectral", "test_points", "criteria")
+MAP_KEYS = ("map", "signals", "spectral", "test_points", "criteria", "transfer_functions", "predictions", "limits")
 _MAP_TABLE_KEYS = ("name", "description", "needs", "vehicle", "sysid", "compid")
 #: ``[map.vehicle]`` keys are parameter names (``FRAME_CLASS``) or ``MAV_TYPE`` (the HEARTBEAT type).
 _VEHICLE_KEY = re.compile(r"[A-Z][A-Z0-9_]{0,15}")
@@ -344,6 +345,39 @@ def _parse_criteria(ctx: _Ctx, raw: Any) -> Criteria:
     return Criteria(**read_table(raw, Criteria, "criteria", ctx.path))
 
 
+def _parse_models(ctx: _Ctx, data: Mapping[str, Any], signals: dict) -> ModelSettings:
+    """``[transfer_functions.*]``, ``[predictions.*]`` and ``[limits]``: what each test point's model
+    is fitted with and held to (every pair's signals in ``[signals]``)."""
+    from livesweep.stages.parametric import specs_of_tables
+
+    raw_tf = data.get("transfer_functions") or {}
+    specs = specs_of_tables(raw_tf, ctx.path) if raw_tf else ()
+    limits = EnvelopeLimits(**read_table(data["limits"], EnvelopeLimits, "limits", ctx.path)) \
+        if "limits" in data else NO_LIMITS
+    for i, pair in enumerate(limits.broken_loop):
+        out, _, inp = pair.partition("/")
+        if out not in signals or inp not in signals:
+            raise ctx.error(f"limits.broken_loop[{i}]", "must be \"output/input\" of signals in [signals]", pair)
+    preds = []
+    raw_p = data.get("predictions") or {}
+    if not isinstance(raw_p, dict):
+        raise ctx.error("predictions", "must be a table of [predictions.NAME] tables", raw_p)
+    for name, raw in raw_p.items():
+        p = Prediction(name=name, **read_table(raw, Prediction, f"predictions.{name}", ctx.path))
+        for key in ("output", "input"):
+            if getattr(p, key) not in signals:
+                raise ctx.error(f"predictions.{name}.{key}", f"names no signal in [signals] (defined: "
+                                f"{', '.join(signals)})", getattr(p, key))
+        p.structures(f"{ctx.path}: predictions.{name}")
+        preds.append(p)
+    for s in specs:
+        for key in ("output", "input"):
+            if getattr(s.model, key) not in signals:
+                raise ctx.error(f"transfer_functions.{s.model.name}.{key}", "names no signal in [signals]",
+                                getattr(s.model, key))
+    return ModelSettings(tuple(specs), tuple(preds), limits, dict(raw_tf) or None)
+
+
 def _parse_test_points(ctx: _Ctx, raw: Any, spectral: SpectralSettings | None) -> TestPointSettings:
     """``[test_points]``: sources, axes, required, min_duration_s (every name a declared input or output)."""
     t = read_table(raw, TestPointSettings, "test_points", ctx.path)
@@ -588,7 +622,7 @@ def _channel_map(ctx: _Ctx, data: Mapping[str, Any], path: Path, *, one_clock: b
     return ChannelMap(name=head.get("name", path.stem), description=head.get("description", ""),
                       needs=head.get("needs", ""), path=path, signals=signals, spectral=spectral,
                       test_points=test_points, vehicle=head.get("vehicle", {}), system=head.get("system"),
-                      criteria=criteria)
+                      criteria=criteria, models=_parse_models(ctx, data, signals))
 
 
 def channel_map_from_tables(tables: Mapping[str, Any], path: str | os.PathLike[str], *,

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from livesweep import limits
+from livesweep.ident.envelope import NO_MODEL_SETTINGS, EnvelopeLimits, ModelSettings, Prediction
 from livesweep.settings_schema import Check, choices, integer, number, numbers, setting, string, write_docs
 from livesweep.spectral.criteria import DEFAULT_CRITERIA, Criteria
 
@@ -223,6 +224,9 @@ class ChannelMap:
         (:class:`~livesweep.telemetry.align.GridAligner`).
     criteria : Criteria
         ``[criteria]``: what makes a response adequate and a test point GO (default the method's).
+    models : ModelSettings
+        ``[transfer_functions.*]``, ``[predictions.*]`` and ``[limits]``: what each test point's
+        model is fitted with and held to (:mod:`livesweep.ident.test_point_model`).
     """
 
     name: str
@@ -235,6 +239,7 @@ class ChannelMap:
     vehicle: dict = field(default_factory=dict)
     system: tuple | None = None
     criteria: Criteria = DEFAULT_CRITERIA
+    models: ModelSettings = NO_MODEL_SETTINGS
 
 
 @dataclass(frozen=True)
@@ -276,7 +281,7 @@ class Case:
 #: The tables docs/case-file.md documents from their fields, by the name its markers use
 #: (``<!-- settings: spectral -->``).
 DOCUMENTED_TABLES = {"case": Case, "record": RecordSpec, "spectral": SpectralSettings, "criteria": Criteria,
-                     "test_points": TestPointSettings}
+                     "test_points": TestPointSettings, "limits": EnvelopeLimits, "predictions": Prediction}
 
 
 def regenerate_docs(text: str) -> str:

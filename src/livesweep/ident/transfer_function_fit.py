@@ -42,7 +42,8 @@ def _canonical(prob: _Problem, x: np.ndarray) -> np.ndarray:
 
 
 def _covariance(J: np.ndarray):
-    """H^-1 with H = 2 J^T J; parameters in an (almost) null direction get inf."""
+    """``(CR bounds, diag(H), H^-1)`` with H = 2 J^T J; parameters in an (almost) null direction
+    get an infinite bound (and an infinite variance in H^-1)."""
     H = 2.0 * J.T @ J
     n = H.shape[0]
     d = np.sqrt(np.clip(np.diag(H), 1e-300, None))
@@ -57,7 +58,8 @@ def _covariance(J: np.ndarray):
         bad = np.any(np.abs(V[:, ~good]) > 1e-3, axis=1)
     var = np.diag(C).copy()
     var[bad] = np.inf
-    return np.sqrt(np.clip(var, 0.0, None)), np.diag(H)
+    C[bad, bad] = np.inf
+    return np.sqrt(np.clip(var, 0.0, None)), np.diag(H), C
 
 
 def _parse_user_start(prob: _Problem, names: list[str], spec: Mapping, base: np.ndarray) -> np.ndarray:
@@ -214,7 +216,7 @@ def fit_transfer_function(pairs, models, *, starts: Sequence[Mapping] | None = N
         x = _canonical(prob, x)
 
     J = prob.jac(x)
-    cr, Hdiag = _covariance(J)
+    cr, Hdiag, cov = _covariance(J)
     total = prob.cost(x)
     dof = max(prob.n_resid - prob.n, 1)
     resid_var = total / dof
@@ -223,4 +225,4 @@ def fit_transfer_function(pairs, models, *, starts: Sequence[Mapping] | None = N
         bad = [f"{k}" for (sc, k), c in zip(prob.keys, cr) if not np.isfinite(c)]
         msg += f"; not identifiable (CR undefined): {', '.join(sorted(set(bad)))}"
     converged = success and math.isfinite(total)
-    return [_fitted(prob, p, names, x, cr, Hdiag, costs[p], resid_var, converged, msg) for p in range(len(pairs))]
+    return [_fitted(prob, p, names, x, cr, Hdiag, costs[p], resid_var, converged, msg, cov) for p in range(len(pairs))]

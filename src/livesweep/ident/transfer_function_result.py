@@ -67,6 +67,10 @@ class FittedTransferFunction:
         Names of the transfer functions fitted together (shared denominator), this one included.
     band_rad_s : tuple
         The pair's fitting band [rad/s].
+    covariance : ndarray or None
+        ``H^-1`` over :attr:`parameters`, in their order (CIFER normalisation, as the bounds:
+        ``sqrt(diag)`` is :attr:`cramer_rao`); what the bound of a figure derived from several
+        parameters is propagated through (:mod:`livesweep.ident.test_point_model`).
     """
 
     name: str
@@ -89,6 +93,7 @@ class FittedTransferFunction:
     residual_variance: float = float("nan")
     fit_group: tuple = ()
     band_rad_s: tuple = ()
+    covariance: np.ndarray | None = None
 
     def response(self, omega) -> np.ndarray:
         """Model response T(j omega) at ``omega`` [rad/s] (complex, output units per input unit)."""
@@ -130,7 +135,7 @@ class FittedTransferFunction:
         }
 
 
-def _fitted(prob, p, names, x, cr, Hdiag, cost, resid_var, converged, msg) -> FittedTransferFunction:
+def _fitted(prob, p, names, x, cr, Hdiag, cost, resid_var, converged, msg, cov=None) -> FittedTransferFunction:
     """Pair ``p``'s result at the solution ``x`` of the fit ``prob`` (a ``_Problem``): its
     parameters with their bounds (``cr``: Cramer-Rao bounds, ``Hdiag``: the Hessian's diagonal,
     both over all of ``x``), factors and roots."""
@@ -171,4 +176,5 @@ def _fitted(prob, p, names, x, cr, Hdiag, cost, resid_var, converged, msg) -> Fi
         cost=float(cost), parameters=params, cramer_rao=crs, cramer_rao_pct=crp, factors=factors,
         converged=bool(converged), message=msg, numerator=str(m.numerator), denominator=str(m.denominator),
         insensitivity_pct=insp, residual_variance=float(resid_var), fit_group=tuple(names),
-        band_rad_s=tuple(float(b) for b in pair.band_rad_s))
+        band_rad_s=tuple(float(b) for b in pair.band_rad_s),
+        covariance=None if cov is None else _frozen(np.asarray(cov, float)[np.ix_(idxs, idxs)]))

@@ -12,6 +12,7 @@ import math
 from dataclasses import asdict, dataclass, replace
 
 from livesweep.errors import ConfigError, quote, require_number
+from livesweep.ident.envelope import NO_MODEL_SETTINGS, ModelSettings
 from livesweep.spectral import DEFAULT_WINDOW_S
 from livesweep.spectral.criteria import DEFAULT_CRITERIA, Criteria
 from livesweep.spectral.online import OnlineSpectralEstimator
@@ -66,6 +67,9 @@ class MonitorSettings:
     criteria : Criteria
         What makes a response adequate and a test point GO (the map's ``[criteria]``): used by the
         verdict, each test point's judgement, the view's threshold and the status text.
+    models : ModelSettings
+        What each closed test point's model is fitted with and held to (the map's
+        ``[transfer_functions]``, ``[predictions]`` and ``[limits]``).
     """
 
     signals: dict
@@ -86,6 +90,7 @@ class MonitorSettings:
     vehicle: dict | None = None
     system: tuple | None = None
     criteria: Criteria = DEFAULT_CRITERIA
+    models: ModelSettings = NO_MODEL_SETTINGS
 
     def to_dict(self) -> dict:
         """Everything a replay needs to run as the live monitor did (the recording's settings attachment)."""
@@ -106,6 +111,7 @@ class MonitorSettings:
             "vehicle": None if not self.vehicle else {k: list(v) for k, v in self.vehicle.items()},
             "system": None if self.system is None else list(self.system),
             "criteria": self.criteria.to_dict(),
+            "models": self.models.to_dict(),
         }
 
     @classmethod
@@ -136,7 +142,7 @@ class MonitorSettings:
         if not isinstance(d, dict):
             raise ConfigError(f"{where}: must be a JSON object of monitor settings, got {quote(d)}")
         try:
-            m = channel_map_from_tables(_map_tables(d), path if path is not None else where, where=where)
+            m = channel_map_from_tables(_map_tables(d, where), path if path is not None else where, where=where)
         except ConfigError as e:           # the map's key paths, as the settings' JSON spells them
             text = str(e)
             for table, key in ((f"{where}: spectral: ", f"{where}: "), (f"{where}: spectral.", f"{where}: "),
@@ -163,7 +169,7 @@ class MonitorSettings:
             segment_s=None if segment is None else require_number(segment, f"{where}: segment_s"),
             update_period_s=require_number(d.get("update_period_s", 0.2), f"{where}: update_period_s"),
             references=sp.references, test_points=m.test_points, map_name=map_name,
-            vehicle=dict(m.vehicle) or None, system=system, criteria=m.criteria,
+            vehicle=dict(m.vehicle) or None, system=system, criteria=m.criteria, models=m.models,
         ).check_limits(where)
         return replace(settings,
                        required_pairs=_saved_pairs(d.get("required_pairs"), sp, f"{where}: required_pairs"),
@@ -231,7 +237,7 @@ class MonitorSettings:
         return self
 
 
-def _map_tables(d: dict) -> dict:
+def _map_tables(d: dict, where: str = "settings") -> dict:
     """The channel-map part of saved settings, shaped as a map file's TOML tables."""
     tables = {}
     if "signals" in d:
@@ -247,6 +253,14 @@ def _map_tables(d: dict) -> dict:
         tables["map"] = {"vehicle": d["vehicle"]}
     if d.get("criteria") is not None:
         tables["criteria"] = d["criteria"]
+    models = d.get("models")
+    if models is not None:
+        if not isinstance(models, dict):
+            raise ConfigError(f"{where}: models: must be an object of transfer_functions, predictions, limits, got {quote(models)}")
+        for k, v in models.items():
+            if k not in ("transfer_functions", "predictions", "limits"):
+                raise ConfigError(f"{where}: models.{k}: unknown; known: transfer_functions, predictions, limits")
+            tables[k] = v
     return tables
 
 

@@ -48,6 +48,7 @@ from livesweep.monitor.link_report import LINK_ANOMALIES, LinkReport
 from livesweep.monitor.map_check import DIAGNOSE_AFTER_S, MapCheck
 from livesweep.monitor.monitor_settings import MonitorSettings
 from livesweep.monitor.sinks import TIMESERIES_EVERY_S, ResultSinks
+from livesweep.monitor.models import ModelKeeper
 from livesweep.monitor.verdicts import Verdicts, tracker_for
 from livesweep.spectral.excitation import ExcitationMonitor
 from livesweep.spectral.online import OnlineSpectralEstimator
@@ -76,6 +77,7 @@ class _Totals:
     wall_s: float = 0.0
     latency_s: deque = field(default_factory=lambda: deque(maxlen=10_000))
     verdict_latency_s: deque = field(default_factory=lambda: deque(maxlen=10_000))
+    model_s: deque = field(default_factory=lambda: deque(maxlen=10_000))   # wall time to fit each model [s]
 
 
 class MonitorPipeline(FrameIntake, EstimateStep, Verdicts, MapCheck, LinkReport, ResultSinks):
@@ -132,6 +134,7 @@ class MonitorPipeline(FrameIntake, EstimateStep, Verdicts, MapCheck, LinkReport,
         self.test_points = tracker_for(settings, self.names)
         self.test_points.source_rates = self._source_rates
         self.test_points.link_counts = self._link_counts      # what the link lost while a test point is open
+        self.models = ModelKeeper(settings)                    # each closed test point's model, and the trend
         self.verdict, self.verdict_reasons = None, ()          # the operator's verdict (test points)
         self._rx_to_data: tuple[int, float] | None = None       # (receive ns, data s) at the aligner's frontier
         self._rx_history: deque = deque()            # (receive ns, data s) of recent frontier moves (the data's pace)
@@ -292,4 +295,6 @@ class MonitorPipeline(FrameIntake, EstimateStep, Verdicts, MapCheck, LinkReport,
             "latency_p50_s": float(np.percentile(lat, 50)) if lat.size else None,
             "latency_p99_s": float(np.percentile(lat, 99)) if lat.size else None,
             "verdict_latency_s": [round(x, 4) for x in self.totals.verdict_latency_s],
+            "models": list(self.models.models),
+            "model_s": [round(x, 4) for x in self.totals.model_s],
         }

@@ -46,7 +46,7 @@ __all__ = ["ReplayResult", "replay", "replay_settings", "recorded_settings", "ma
            "Monitor", "monitor", "DEFAULT_MAP"]
 
 #: The live results kept in order (:attr:`Monitor.events`), by their ``/livesweep/<name>`` channel.
-EVENTS = ("test_point", "verdict", "alert")
+EVENTS = ("test_point", "verdict", "alert", "model")
 #: What a recording made by :func:`monitor` says made it, unless ``metadata`` says otherwise.
 DEFAULT_METADATA = {"test_point": {"source": "livesweep.monitor()"}}
 
@@ -73,6 +73,9 @@ class ReplayResult:
     alerts : tuple of dict
         Every alert raised, as ``/livesweep/alert`` carries it (``t_s``, ``kind``, ``message``,
         ``value``).
+    models : tuple of dict
+        The model of each closed test point that had a band to fit, as ``/livesweep/model``
+        carries it (``test_point``, ``pairs``, ``breaches``, ``trend``, ...).
     counters : dict
         The final counters the command's summary prints: ``sources`` (per source), ``aligner``
         (repairs and gaps) and ``pipeline``.
@@ -95,6 +98,7 @@ class ReplayResult:
     link: dict | None
     summary: dict
     recording: Path | None = None
+    models: tuple = ()
 
     @property
     def verdict(self) -> str | None:
@@ -266,7 +270,7 @@ def replay(path, case=None, map=None, *, settings=None, record=None, rerun=None,
     return ReplayResult(path=log, settings=chosen, settings_source=source, test_points=kept.of("test_point"),
                         verdicts=kept.of("verdict"), alerts=kept.of("alert"), counters=summary["counters"],
                         link=kept.last("link"), summary=summary,
-                        recording=None if recorder is None else Path(recorder.path))
+                        recording=None if recorder is None else Path(recorder.path), models=kept.of("model"))
 
 
 # -- live --------------------------------------------------------------------------------------------
@@ -408,9 +412,14 @@ class Monitor:
 
     @property
     def events(self) -> tuple:
-        """Every test point, verdict change and alert so far, in order, as ``(channel, dict)``
-        with ``channel`` one of ``"test_point"``, ``"verdict"``, ``"alert"``."""
+        """Every test point, verdict change, alert and model so far, in order, as ``(channel, dict)``
+        with ``channel`` one of ``"test_point"``, ``"verdict"``, ``"alert"``, ``"model"``."""
         return self._results.events()
+
+    @property
+    def models(self) -> tuple:
+        """The model of each closed test point so far, as ``/livesweep/model`` carries it."""
+        return self._results.of("model")
 
     @property
     def test_points(self) -> tuple:

@@ -79,7 +79,7 @@ def map_settings(case=None, map=None, *, window_s=None, update_period_s=None, sy
         update_period_s=0.2, required_pairs=None, saturation_limits=None,
         references=tuple(spectral.references) if spectral.references else None,
         test_points=chosen.test_points, map_name=chosen.name, vehicle=dict(chosen.vehicle) or None,
-        system=chosen.system, criteria=chosen.criteria,
+        system=chosen.system, criteria=chosen.criteria, models=chosen.models,
     )
     return with_options(settings, str(where), window_s=window_s, update_period_s=update_period_s, system=system,
                         required_pairs=required_pairs, saturation_limits=saturation_limits,

@@ -8,10 +8,13 @@ the sliding window. :func:`tracker_for` makes the tracker a settings object asks
 
 from __future__ import annotations
 
+import time
+
 from livesweep.config import TestPointSettings
 from livesweep.monitor.monitor_settings import MonitorSettings
 from livesweep.monitor.testpoints import SOURCES, TestPointTracker
 from livesweep.monitor.text import time_text
+from livesweep.spectral.excitation import Alert
 from livesweep.telemetry.clock import receive_ns
 
 __all__ = ["Verdicts", "tracker_for"]
@@ -51,11 +54,38 @@ class Verdicts:
             if self.view is not None and hasattr(self.view, "log_test_point"):
                 self.view.log_test_point(t_s, rec)
                 self._show_focus(t_s, rec)
+            made = self._model_of(rec) if rec["state"] == "closed" else None
             if rec["state"] == "closed":
                 self._result("test_point", rec, log_time_ns, flush=True)
                 if self.publisher is not None:
                     self.publisher.publish("test_point", rec)
+            if made is not None:
+                self._say_model(t_s, made)
             self._update_verdict(t_s, rec)
+
+    def _model_of(self, rec: dict) -> dict | None:
+        """The ``/livesweep/model`` record of the closed test point ``rec`` (None: nothing to fit);
+        its limit breaches go into ``rec`` (``limits``), so the verdict says them first."""
+        start = time.perf_counter()
+        made = self.models.model_of(len(self.test_points.closed), rec,
+                                    self.test_points.judgements.get(rec["start_s"]))
+        if made is None:
+            return None
+        self.totals.model_s.append(time.perf_counter() - start)
+        record, _ = made
+        rec["limits"] = list(record["breaches"])
+        rec["model_pairs"] = [p["name"] for p in record["pairs"]]
+        return record
+
+    def _say_model(self, t_s: float, record: dict) -> None:
+        """A test point's model to every sink, and a ``limit`` alert per breach."""
+        self._result("model", record, flush=True)
+        if self.publisher is not None:
+            self.publisher.publish("model", record)
+        if self.view is not None and hasattr(self.view, "log_model"):
+            self.view.log_model(t_s, record)
+        for text in record["breaches"]:
+            self._say_alert(t_s, Alert("limit", text))
 
     def _show_focus(self, t_s: float, rec: dict) -> None:
         """The swept pair of a test point as its verdict judged it, in the view's "Test point" tab."""
@@ -92,7 +122,7 @@ class Verdicts:
             return "WAIT", (f"test point running: {who}: {rec['running']}, {rec.get('progress', '')}".rstrip(", "),
                             *rec["reasons"]), rec
         return rec["verdict"], (f"last test point ({who} {time_text(rec['start_s'])} - {time_text(rec['end_s'])}): "
-                                f"{rec['label']}", *rec["missing"], *rec["reasons"]), rec
+                                f"{rec['label']}", *rec.get("limits", ()), *rec["missing"], *rec["reasons"]), rec
 
     def _update_verdict(self, t_s: float, rec: dict | None = None) -> None:
         verdict, reasons, rec = self._operator_verdict(rec)

@@ -38,7 +38,7 @@ __all__ = ["Alert", "PairStatus", "ExcitationStatus", "ExcitationMonitor", "Swee
            "half_period_frequencies", "log_band_weights", "ALERT_KINDS"]
 
 ALERT_KINDS = ("coherence_collapse", "input_correlation", "saturation", "data_gap", "packet_loss", "link", "map",
-               "verdict")
+               "verdict", "limit")
 
 
 @dataclass(frozen=True)

@@ -89,8 +89,8 @@ def handling_qualities(omega, H, *, coherence=None, output_units: str = "deg/s",
             "response": "attitude (rate / s)" if integrate else "attitude"}
 
 
-def _tf_table(case: Case, name: str, raw) -> dict:
-    where = f"{case.path}: transfer_functions.{name}"
+def _tf_table(path, name: str, raw) -> dict:
+    where = f"{path}: transfer_functions.{name}"
     require_table(raw, _TF_KEYS, where)
     for key in ("output", "input", "denominator"):
         if not isinstance(raw.get(key), str):
@@ -124,10 +124,19 @@ class TransferFunctionSpec:
 def transfer_function_specs(case: Case) -> tuple[TransferFunctionSpec, ...]:
     """Every ``[transfer_functions.*]`` of the case, validated and parsed (ConfigError naming file
     and key, before any data is read)."""
+    return specs_of_tables(case.tables.get("transfer_functions") or {}, case.path)
+
+
+def specs_of_tables(tables, path) -> tuple[TransferFunctionSpec, ...]:
+    """The ``[transfer_functions.*]`` tables ``tables`` of the file ``path`` (a case or a map),
+    validated and parsed (ConfigError naming file and key)."""
+    if not isinstance(tables, dict):
+        raise ConfigError(f"{path}: transfer_functions: must be a table of [transfer_functions.NAME] tables, "
+                          f"got {quote(tables)}")
     specs = []
-    for name, raw in (case.tables.get("transfer_functions") or {}).items():
-        t = _tf_table(case, name, raw)
-        where = f"{case.path}: transfer_functions.{name}"
+    for name, raw in tables.items():
+        t = _tf_table(path, name, raw)
+        where = f"{path}: transfer_functions.{name}"
         structures = {}
         for key, prefix in STRUCTURE_PREFIXES.items():
             try:

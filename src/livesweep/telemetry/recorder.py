@@ -45,6 +45,15 @@ _GENERIC = {"type": "object", "description": "JSON object as received"}
 _COUNT = {"type": "integer", "minimum": 0}
 _COUNT_MAP = {"type": "object", "additionalProperties": _COUNT}
 
+#: A value of a test point's model with its Cramer-Rao bound (``/livesweep/model``).
+_FIGURE = {"type": "object", "properties": {
+    "name": {"type": "string"}, "value": {"type": ["number", "null"]},
+    "cramer_rao": {"type": ["number", "null"], "description": "its Cramer-Rao bound, in its units"},
+    "units": {"type": "string"},
+    "flags": {"type": "array", "items": {"type": "string"},
+              "description": "why the method's guidelines say not to trust it"}},
+    "required": ["name", "value", "cramer_rao"]}
+
 #: JSON Schemas of livesweep's own channels (``/livesweep/<name>``).
 RESULT_SCHEMAS: dict[str, dict] = {
     "link": {
@@ -128,6 +137,50 @@ RESULT_SCHEMAS: dict[str, dict] = {
                                         "required_fraction": {"type": "number"}}},
         },
         "required": ["start_s", "end_s", "source", "swept_input", "verdict", "pairs", "missing"],
+    },
+    "model": {
+        "type": "object",
+        "description": "The model of one closed test point: a low-order equivalent system per pair, on its coherent "
+                       "band, with Cramer-Rao bounds, handling-qualities figures, limits and the trend over the flight",
+        "properties": {
+            "schema": {"type": "string", "description": "livesweep.model/1"},
+            "test_point": {"type": "object", "description": "the test point modelled", "properties": {
+                "number": {"type": "integer", "description": "its place among the closed test points, from 1"},
+                "start_s": {"type": "number"}, "end_s": {"type": "number"},
+                "swept_input": {"type": ["string", "null"]}, "axis": {"type": ["integer", "null"]},
+                "source": {"type": "string"}, "verdict": {"type": "string"}, "label": {"type": "string"}}},
+            "pairs": {"type": "array", "items": {"type": "object", "properties": {
+                "name": {"type": "string", "description": "output/input"},
+                "output": {"type": "string"}, "input": {"type": "string"},
+                "structure": {"type": "string", "enum": ["first order", "second order", "case"]},
+                "numerator": {"type": "string", "description": "shorthand, as [transfer_functions] writes it"},
+                "denominator": {"type": "string"},
+                "band_rad_s": {"type": "array", "items": {"type": ["number", "null"]},
+                               "description": "the fitted band [rad/s]"},
+                "cost": {"type": ["number", "null"], "description": "J of the fit"},
+                "converged": {"type": "boolean"},
+                "parameters": {"type": "array", "items": _FIGURE},
+                "figures": {"type": "array", "items": _FIGURE},
+                "flags": {"type": "array", "items": {"type": "string"},
+                          "description": "the method's guidelines the fit fails"},
+                "limits": {"type": "array", "items": {"type": "object", "properties": {
+                    "pair": {"type": "string"}, "name": {"type": "string"},
+                    "value": {"type": ["number", "null"]}, "limit": {"type": ["number", "array", "null"]},
+                    "ok": {"type": "boolean"}, "text": {"type": "string"}}}},
+                "curve": {"type": "object", "description": "data and model over the band: omega_rad_s, magnitude_db, "
+                                                          "phase_deg, coherence, model_*, predicted_*",
+                          "additionalProperties": {"type": "array", "items": {"type": ["number", "null"]}}},
+            }, "required": ["name", "output", "input", "parameters", "figures", "cost"]}},
+            "skipped": {"type": "array", "items": {"type": "string"}},
+            "limits_ok": {"type": "boolean"},
+            "breaches": {"type": "array", "items": {"type": "string"}},
+            "criteria": {"type": "object"},
+            "trend": {"type": "array", "items": {"type": "object", "properties": {
+                "pair": {"type": "string"},
+                "rows": {"type": "array", "items": {"type": "object"}}}}},
+            "trend_notes": {"type": "array", "items": {"type": "string"}},
+        },
+        "required": ["schema", "test_point", "pairs", "limits_ok", "breaches"],
     },
     "verdict": {
         "type": "object",
