@@ -86,7 +86,9 @@ def _results(path: Path) -> dict:
     return {"test_points": data("/livesweep/test_point"), "verdicts": data("/livesweep/verdict"),
             "alerts": data("/livesweep/alert"), "texts": texts, "last_frame_rx": last_frame,
             "estimate_verdicts": [(e["t_s"], e["verdict"], e["reasons"]) for e in data("/livesweep/estimate")],
-            "tp_logged_ns": [m.log_time_ns for m in read_messages(path, topics="/livesweep/test_point")]}
+            "tp_logged_ns": [m.log_time_ns for m in read_messages(path, topics="/livesweep/test_point")],
+            "models": data("/livesweep/model"),
+            "model_logged_ns": [m.log_time_ns for m in read_messages(path, topics="/livesweep/model")]}
 
 
 def _reference(log: Path) -> dict:
@@ -370,3 +372,57 @@ def test_replay_reproduces_the_map_alerts_and_the_judgement_without_data(quiet_r
     assert rep["estimate_verdicts"] == live["estimate_verdicts"]
     if name == "before_data":
         assert sum(x["kind"] == "map" for x in rep["alerts"]) == 16
+
+
+def _signal_toml(name: str, spec) -> str:
+    """A ``[signals.NAME]`` table of a map's signal (what an offline case needs to read it)."""
+    lines = [f"[signals.{name}]"]
+    for key in ("topic", "field", "stamp", "stamp_topic", "units"):
+        if getattr(spec, key) is not None:
+            lines.append(f"{key} = {getattr(spec, key)!r}".replace("'", '"'))
+    for key in ("stamp_scale", "scale", "offset"):
+        lines.append(f"{key} = {float(getattr(spec, key))!r}")
+    for key in ("sysid", "compid"):
+        if getattr(spec, key) is not None:
+            lines.append(f"{key} = {int(getattr(spec, key))}")
+    if spec.where:
+        lines.append("where = { " + ", ".join(f"{k} = {v!r}" for k, v in spec.where) + " }")
+    return "\n".join(lines) + "\n\n"
+
+
+@pytest.mark.parametrize("chirp", ["roll", "pitch"])
+@pytest.mark.parametrize("speed", ["1x", "10x"])
+def test_each_go_test_point_gets_its_model_within_a_second_equal_to_offline_identify(runs, chirp, speed, tmp_path):
+    """Streamed live with every core busy: each GO test point's /livesweep/model is recorded within
+    1 s of its /livesweep/test_point record (receive clock), and its values equal offline identify
+    of the recording over the test point's span (the identify stage resamples the raw telemetry
+    itself) within their Cramer-Rao bounds."""
+    from livesweep.maps import load_map
+    from livesweep.stages.identify import identify
+
+    for preset in runs["_presets"]:
+        res = runs[f"{chirp}-{speed}-{preset}"]
+        signals = load_map(preset).signals
+        go = [(tp, ns) for tp, ns in zip(res["test_points"], res["tp_logged_ns"]) if tp["verdict"] == "GO"]
+        assert go, (preset, [tp["label"] for tp in res["test_points"]])
+        for tp, ns in go:
+            [(model, mns)] = [(m, n) for m, n in zip(res["models"], res["model_logged_ns"])
+                              if m["test_point"]["start_s"] == tp["start_s"]]
+            assert 0 <= (mns - ns) * 1e-9 < 1.0, (preset, (mns - ns) * 1e-9)
+            for pair in model["pairs"]:
+                lo, hi = tp["judged_band_rad_s"]
+                settings = load_map(preset).spectral
+                case = tmp_path / f"{preset}-{pair['output']}.toml"
+                case.write_text(
+                    f'[case]\nname = "tp"\n\n[[identify]]\nlog = "{res["path"]}"\nstart_s = {tp["start_s"]}\n'
+                    f'end_s = {tp["end_s"]}\n\n' + _signal_toml(pair["input"], signals[pair["input"]])
+                    + _signal_toml(pair["output"], signals[pair["output"]])
+                    + f'[spectral]\ninputs = ["{pair["input"]}"]\noutputs = ["{pair["output"]}"]\n'
+                    f'band_rad_s = [{lo}, {hi}]\nsample_rate_hz = {settings.sample_rate_hz}\n\n'
+                    f'[transfer_functions.fit]\noutput = "{pair["output"]}"\ninput = "{pair["input"]}"\n'
+                    f'numerator = "{pair["numerator"]}"\ndenominator = "{pair["denominator"]}"\n')
+                fit = identify(case, until="transfer-functions", parallel=False).transfer_functions.fits[0]
+                for p in pair["parameters"]:
+                    assert p["cramer_rao"] is not None, (preset, p)
+                    assert abs(p["value"] - fit.parameters[p["name"]]) <= p["cramer_rao"], \
+                        (preset, speed, pair["name"], p, fit.parameters[p["name"]])

@@ -84,8 +84,10 @@ class Verdicts:
             self.publisher.publish("model", record)
         if self.view is not None and hasattr(self.view, "log_model"):
             self.view.log_model(t_s, record)
-        for text in record["breaches"]:
-            self._say_alert(t_s, Alert("limit", text))
+        for pair in record["pairs"]:
+            for c in pair["limits"]:
+                if not c["ok"]:
+                    self._say_alert(t_s, Alert("limit", c["text"], 0.0 if c["value"] is None else float(c["value"])))
 
     def _show_focus(self, t_s: float, rec: dict) -> None:
         """The swept pair of a test point as its verdict judged it, in the view's "Test point" tab."""
