@@ -139,7 +139,10 @@ def test_a_prediction_with_its_delay_doubled_breaks_the_limit_on_its_pair_only(l
     import livesweep
 
     m = tmp_path / "map.toml"
-    m.write_text(MAP.read_text() + "\n" + _prediction("roll_rate", "p", "roll", offline["roll"], 1.0)
+    text = MAP.read_text().replace("min_duration_s = 10.0", 'min_duration_s = 10.0\nconditions = ["alt"]')
+    text = text.replace("[spectral]", '[signals.alt]\ntopic = "/dataflash/CTUN"\nfield = "Alt"\nstamp = "TimeUS"\n'
+                        'stamp_scale = 1e-6\nunits = "m"\n\n[spectral]')
+    m.write_text(text + "\n" + _prediction("roll_rate", "p", "roll", offline["roll"], 1.0)
                  + _prediction("pitch_rate", "q", "pitch", offline["pitch"], 2.0))
     runs = {axis: livesweep.replay(path, map=str(m)) for axis, path in logs.items()}
     roll, pitch = runs["roll"], runs["pitch"]
@@ -160,3 +163,20 @@ def test_a_prediction_with_its_delay_doubled_breaks_the_limit_on_its_pair_only(l
     assert v["reasons"][1] == alerts[0]["message"]
     # the fit itself does not depend on the prediction
     assert qp["parameters"] == live["pitch"].models[0]["pairs"][0]["parameters"]
+    # the map's condition, averaged over the test point, against pymavlink's reading of CTUN.Alt
+    for axis, r in runs.items():
+        tp = r.models[0]["test_point"]
+        alt = _ctun_alt(LOGS[axis], tp["start_s"], tp["end_s"])
+        assert tp["conditions"]["alt"] == pytest.approx(alt, rel=1e-6)      # CTUN.Alt is a float32
+        assert r.models[0]["trend"][0]["rows"][-1]["conditions"] == tp["conditions"]
+
+
+def _ctun_alt(log: Path, start_s: float, end_s: float) -> float:
+    from pymavlink import mavutil
+
+    m = mavutil.mavlink_connection(str(log))
+    vals = []
+    while (msg := m.recv_match(type="CTUN")) is not None:
+        if start_s <= msg.TimeUS * 1e-6 <= end_s:
+            vals.append(msg.Alt)
+    return sum(vals) / len(vals)

@@ -378,7 +378,8 @@ def _parse_models(ctx: _Ctx, data: Mapping[str, Any], signals: dict) -> ModelSet
     return ModelSettings(tuple(specs), tuple(preds), limits, dict(raw_tf) or None)
 
 
-def _parse_test_points(ctx: _Ctx, raw: Any, spectral: SpectralSettings | None) -> TestPointSettings:
+def _parse_test_points(ctx: _Ctx, raw: Any, spectral: SpectralSettings | None,
+                       signals: dict | None = None) -> TestPointSettings:
     """``[test_points]``: sources, axes, required, min_duration_s (every name a declared input or output)."""
     t = read_table(raw, TestPointSettings, "test_points", ctx.path)
     if spectral is None:
@@ -408,6 +409,10 @@ def _parse_test_points(ctx: _Ctx, raw: Any, spectral: SpectralSettings | None) -
         if name not in required:
             required[name] = (outputs[k],) if k < len(outputs) else tuple(outputs)
     required = {name: required[name] for name in inputs}
+    for i, n in enumerate(t.get("conditions", ())):
+        if signals is not None and n not in signals:
+            raise ctx.error(f"test_points.conditions[{i}]", f"names no signal in [signals] (defined: "
+                            f"{', '.join(signals)})", n)
     return TestPointSettings(**{**t, "axes": axes, "required": required})
 
 
@@ -617,7 +622,7 @@ def _channel_map(ctx: _Ctx, data: Mapping[str, Any], path: Path, *, one_clock: b
     if one_clock:
         _one_clock(ctx, signals)
     spectral = _parse_spectral(ctx, data["spectral"], signals) if "spectral" in data else None
-    test_points = _parse_test_points(ctx, data["test_points"], spectral) if "test_points" in data else None
+    test_points = _parse_test_points(ctx, data["test_points"], spectral, signals) if "test_points" in data else None
     criteria = _parse_criteria(ctx, data["criteria"]) if "criteria" in data else Criteria()
     return ChannelMap(name=head.get("name", path.stem), description=head.get("description", ""),
                       needs=head.get("needs", ""), path=path, signals=signals, spectral=spectral,

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from livesweep import limits
 from livesweep.ident.envelope import NO_MODEL_SETTINGS, EnvelopeLimits, ModelSettings, Prediction
-from livesweep.settings_schema import Check, choices, integer, number, numbers, setting, string, write_docs
+from livesweep.settings_schema import Check, choices, integer, names, number, numbers, setting, string, write_docs
 from livesweep.spectral.criteria import DEFAULT_CRITERIA, Criteria
 
 __all__ = ["SignalSpec", "RecordSpec", "SpectralSettings", "TestPointSettings", "ChannelMap", "Case", "Criteria",
@@ -174,6 +174,9 @@ class TestPointSettings:
         every output when there are fewer outputs than that).
     min_duration_s : float
         A detected sweep shorter than this is no test point [s]; default 10.
+    conditions : tuple of str
+        Signals of ``[signals]`` averaged over each test point (the conditions its model's trend
+        is read against); none by default.
     """
 
     __test__ = False                  # not a pytest class, whatever its name says
@@ -193,6 +196,8 @@ class TestPointSettings:
                                  "than that)")
     min_duration_s: float = setting(10.0, number(0.0), "a detected sweep shorter than this is no test point "
                                     "(a doublet)", units="s")
+    conditions: tuple = setting((), names(), "signals of `[signals]` averaged over each test point, to read its "
+                                "model's trend against (airspeed, altitude); not analysed", default_text="none")
 
 
 @dataclass(frozen=True)

@@ -47,6 +47,8 @@ class FrameIntake:
             hist.append(self._rx_to_data)
             while len(hist) > 2 and (hist[-1][0] - hist[1][0]) * 1e-9 > PACE_SPAN_S:
                 hist.popleft()
+        if self.conditions is not None and f.topic in self.conditions.topics:
+            self.conditions.take(f, self._data_time(f.receive_ns), self.aligner.system)
         if self.map_problems is None or self._map_missing:
             self._map_check(f.receive_ns)
         if self.test_points.wants(f.topic):

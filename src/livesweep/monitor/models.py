@@ -61,10 +61,12 @@ class ModelKeeper:
         self.rows: dict[str, list] = {}          # pair -> trend rows, in test-point order
         self.models: list[dict] = []             # every /livesweep/model record, in order
 
-    def model_of(self, number: int, rec: dict, judgement) -> tuple[dict, TestPointModel] | None:
+    def model_of(self, number: int, rec: dict, judgement, conditions: dict | None = None
+                 ) -> tuple[dict, TestPointModel] | None:
         """The ``/livesweep/model`` record of closed test point ``number`` (1-based: its place among the
-        closed ones) with record ``rec`` and closing judgement ``judgement``, and the model; None when no
-        pair of it has a response to fit (too short, lost, not judged)."""
+        closed ones) with record ``rec``, closing judgement ``judgement`` and the means of the map's
+        conditions over it (name -> value or None), and the model; None when no pair of it has a
+        response to fit (too short, lost, not judged)."""
         if judgement is None or not judgement.final or not any(getattr(p, "response", None) is not None
                                                                  for p in judgement.pairs):
             return None
@@ -78,13 +80,15 @@ class ModelKeeper:
         for p in model.pairs:
             rows = self.rows.setdefault(p.name, [])
             rows.append({"test_point": number, "start_s": rec["start_s"], "verdict": rec["verdict"],
+                         "conditions": dict(conditions or {}),
                          "parameters": {f.name: [f.value, f.cramer_rao] for f in p.parameters},
                          "figures": {f.name: [f.value, f.cramer_rao] for f in p.figures},
                          "cost": p.fit.cost})
             trend.append({"pair": p.name, "rows": [dict(r) for r in rows]})
             notes += trend_notes(p.name, rows)
         record = {**record, "test_point": {"number": number, **{k: rec.get(k) for k in (
-            "start_s", "end_s", "swept_input", "axis", "source", "verdict", "label")}},
+            "start_s", "end_s", "swept_input", "axis", "source", "verdict", "label")},
+                                    "conditions": dict(conditions or {})},
                   "trend": trend, "trend_notes": notes}
         self.models.append(record)
         return record, model

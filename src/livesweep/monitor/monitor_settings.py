@@ -106,7 +106,8 @@ class MonitorSettings:
             {k: list(v) for k, v in self.saturation_limits.items()},
             "test_points": None if tp is None else {
                 "sources": list(tp.sources), "axes": {str(k): v for k, v in tp.axes.items()},
-                "required": {k: list(v) for k, v in tp.required.items()}, "min_duration_s": tp.min_duration_s},
+                "required": {k: list(v) for k, v in tp.required.items()}, "min_duration_s": tp.min_duration_s,
+                **({"conditions": list(tp.conditions)} if tp.conditions else {})},
             "map_name": self.map_name,
             "vehicle": None if not self.vehicle else {k: list(v) for k, v in self.vehicle.items()},
             "system": None if self.system is None else list(self.system),

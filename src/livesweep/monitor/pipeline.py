@@ -41,14 +41,15 @@ import numpy as np
 
 from livesweep.errors import ConfigError
 from livesweep.monitor.alerts import AlertGate
+from livesweep.monitor.conditions import ConditionMeans
 from livesweep.monitor.estimate_step import ALL_PAIRS_EVERY, ON_GRID_S, Estimate, EstimateStep
 from livesweep.monitor.ingest import FrameQueue, Ingest
 from livesweep.monitor.intake import PACE_SPAN_S, FrameIntake
 from livesweep.monitor.link_report import LINK_ANOMALIES, LinkReport
 from livesweep.monitor.map_check import DIAGNOSE_AFTER_S, MapCheck
 from livesweep.monitor.monitor_settings import MonitorSettings
-from livesweep.monitor.sinks import TIMESERIES_EVERY_S, ResultSinks
 from livesweep.monitor.models import ModelKeeper
+from livesweep.monitor.sinks import TIMESERIES_EVERY_S, ResultSinks
 from livesweep.monitor.verdicts import Verdicts, tracker_for
 from livesweep.spectral.excitation import ExcitationMonitor
 from livesweep.spectral.online import OnlineSpectralEstimator
@@ -180,6 +181,10 @@ class MonitorPipeline(FrameIntake, EstimateStep, Verdicts, MapCheck, LinkReport,
         self._topics_seen: dict = {}                    # topic -> (frames taken, the first one's data)
         self._analysed: dict[str, bool] = {}            # topic -> the analysis uses it
         self._wanted = {spec.topic for spec in self.aligner.specs.values()} | set(self.aligner.stamp_topics)
+        named = settings.test_points.conditions if settings.test_points is not None else ()
+        self.conditions = ConditionMeans({n: settings.signals[n] for n in named}) if named else None
+        if self.conditions is not None:
+            self._wanted |= self.conditions.topics
         self._unfit: str | None = None                  # why the map does not fit the vehicle, once said
         self._lost_said = False                         # the telemetry-lost event of this silence was made
 

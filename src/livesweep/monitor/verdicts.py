@@ -67,8 +67,9 @@ class Verdicts:
         """The ``/livesweep/model`` record of the closed test point ``rec`` (None: nothing to fit);
         its limit breaches go into ``rec`` (``limits``), so the verdict says them first."""
         start = time.perf_counter()
+        conditions = None if self.conditions is None else self.conditions.means(rec["start_s"], rec["end_s"])
         made = self.models.model_of(len(self.test_points.closed), rec,
-                                    self.test_points.judgements.get(rec["start_s"]))
+                                    self.test_points.judgements.get(rec["start_s"]), conditions)
         if made is None:
             return None
         self.totals.model_s.append(time.perf_counter() - start)

@@ -148,7 +148,9 @@ RESULT_SCHEMAS: dict[str, dict] = {
                 "number": {"type": "integer", "description": "its place among the closed test points, from 1"},
                 "start_s": {"type": "number"}, "end_s": {"type": "number"},
                 "swept_input": {"type": ["string", "null"]}, "axis": {"type": ["integer", "null"]},
-                "source": {"type": "string"}, "verdict": {"type": "string"}, "label": {"type": "string"}}},
+                "source": {"type": "string"}, "verdict": {"type": "string"}, "label": {"type": "string"},
+                "conditions": {"type": "object", "additionalProperties": {"type": ["number", "null"]},
+                               "description": "the map's [test_points] conditions averaged over it"}}},
             "pairs": {"type": "array", "items": {"type": "object", "properties": {
                 "name": {"type": "string", "description": "output/input"},
                 "output": {"type": "string"}, "input": {"type": "string"},
