@@ -8,7 +8,7 @@ from livesweep.ident.accuracy import pct_text
 from livesweep.ident.cost import N_OMEGA
 from livesweep.ident.residual import N_OMEGA_LOOP, effect_text
 
-__all__ = ["summary_lines", "repair_lines"]
+__all__ = ["summary_lines", "repair_lines", "live_model_lines"]
 
 
 def _worst_cr(fit) -> str:
@@ -65,8 +65,35 @@ def summary_lines(ident) -> list[str]:
             out.append(f"  final model (state space + {added}): J_ave {fit.cost_average:.1f} "
                        f"({ss.fit.cost_average:.1f} before the residual loop, both on {N_OMEGA} points per pair), "
                        f"{sum(not p.fixed for p in fit.parameters)} free parameters (worst CR {_worst_cr(fit)})")
+    out += live_model_lines(ident)
     for note in ident.data_quality["notes"]:
         out.append(f"  note: {note}")
+    return out
+
+
+def live_model_lines(ident) -> list[str]:
+    """One line per pair of each model the live monitor recorded for the case's test points, with
+    how it stands against the transfer function of the same structure; then the reader's notes."""
+    from livesweep.stages.live_models import AGREE_BOUNDS, compare_live_models
+
+    live = getattr(ident, "live_models", None)
+    if live is None:
+        return []
+    fits = ident.transfer_functions.fits if ident.transfer_functions is not None else ()
+    out = []
+    for m, compared in zip(live.models, compare_live_models(live, fits)):
+        for p, (cmp, why) in zip(m.pairs, compared):
+            cost = "n/a" if p.cost is None else f"{p.cost:.1f}"
+            text = f"  in flight, test point {m.test_point.get('number', '?')}: {p.name} {p.structure}, J {cost}"
+            if cmp is None:
+                text += f"; not compared ({why})"
+            elif cmp.max_bounds is None:
+                text += f"; TF {cmp.transfer_function}: no parameter with both bounds"
+            else:
+                text += (f"; TF {cmp.transfer_function}: {'agrees' if cmp.agrees else 'DIFFERS'}, largest difference "
+                         f"{cmp.max_bounds:.2g} combined bounds (limit {AGREE_BOUNDS:g})")
+            out.append(text)
+    out += [f"  note: {n}" for n in live.notes]
     return out
 
 

@@ -3,8 +3,9 @@
 A first screen with the case, the date, the livesweep version, the input logs (SHA-256) and a
 summary of every stage with its flags against the method's guidelines
 (:func:`livesweep.report.summary.stage_summary`); then data quality, frequency responses,
-transfer functions, state-space derivatives with units, the mode table, time-domain
-verification, the residual loop, and a methods appendix so the document stands alone. Printable
+transfer functions, the models the live monitor recorded in flight beside them ("In flight"),
+state-space derivatives with units, the mode table, time-domain verification, the residual loop,
+and a methods appendix so the document stands alone. Printable
 (a print stylesheet). Rendered from the ``report.json`` dictionary only.
 """
 
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import html
 import math
+from pathlib import Path
 
 from livesweep.report.summary import GUIDELINES, cr_text, guidelines, modes, report_criteria, stage_summary
 from livesweep.spectral.criteria import DEFAULT_CRITERIA
@@ -209,6 +211,124 @@ def _transfer_functions(report: dict) -> str:
             "<th>band [rad/s]</th><th>J</th><th>CR [%]</th></tr>" + "".join(rows) + "</table>"
             + ("<h3>Handling-qualities parameters</h3><table><tr><th>name</th><th>response</th>" + hq_head
                + "</tr>" + "".join(hq) + "</table>" if hq else ""))
+
+
+def _pm_text(v: dict | None, spec: str = ".4g") -> str:
+    """``value ± bound units`` of a recorded value (``n/a`` without a value)."""
+    if not v or v.get("value") is None:
+        return "n/a"
+    bound = "" if v.get("cramer_rao") is None else f" ± {_num(v['cramer_rao'], '.2g')}"
+    return f"{_num(v['value'], spec)}{bound} {v.get('units') or ''}".rstrip()
+
+
+def _band_text(band) -> str:
+    return "%.3g – %.3g" % tuple(band) if band and len(band) == 2 and None not in band else "—"
+
+
+def _live_structure(p: dict) -> str:
+    """K · numerator / denominator · e^(−τs) of a live pair, in the shorthand."""
+    names = {v["name"] for v in p.get("parameters") or []}
+    delay = " · e<sup>−τs</sup>" if "tau" in names else ""
+    num = f" · {e(p['numerator'])}" if p.get("numerator") else ""
+    return f"K{num} / {e(p.get('denominator') or '1')}{delay}"
+
+
+def _live_comparison(p: dict, report: dict) -> str:
+    """The parameters of one live pair: in flight, and beside the identification's when compared."""
+    c = p.get("comparison")
+    if c is None:
+        rows = "".join(f"<tr><td>{e(v['name'])}</td><td class='num'>{_num(v['value'], '.4g')}</td>"
+                       f"<td class='num'>{_num(v['cramer_rao'], '.2g')}</td><td>{e(v.get('units') or '')}</td>"
+                       f"<td class='{'flag' if v.get('flags') else ''}'>{e('; '.join(v.get('flags') or ()))}</td></tr>"
+                       for v in p.get("parameters") or [])
+        return ("<table><tr><th>parameter</th><th>in flight</th><th>CR</th><th>units</th><th>flags</th></tr>"
+                + rows + "</table>")
+    tf = next((t for t in report.get("transfer_functions") or [] if t["name"] == c["transfer_function"]), {})
+    rows = []
+    for q in c["parameters"]:
+        units = (tf.get("gain_units") or "") if q["name"] == "gain" else q.get("units") or ""
+        name = q["name"] if q["offline_name"] == q["name"] else f"{q['name']} ({q['offline_name']})"
+        bad = q.get("agrees") is False
+        rows.append(f"<tr><td>{e(name)}</td><td>{e(units)}</td>"
+                    f"<td class='num'>{_num(q['live_value'], '.4g')}</td>"
+                    f"<td class='num'>{_num(q['live_cramer_rao'], '.2g')}</td>"
+                    f"<td class='num'>{_num(q['offline_value'], '.4g')}</td>"
+                    f"<td class='num'>{_num(q['offline_cramer_rao'], '.2g')}</td>"
+                    f"<td class='num'>{_num(q['difference'], '+.3g')}</td>"
+                    f"<td class='num {'flag' if bad else 'pass' if q.get('agrees') else ''}'>"
+                    f"{_num(q['bounds'], '+.2g')}</td>"
+                    "</tr>")
+    rows.append(f"<tr class='info'><td>band [rad/s]</td><td></td>"
+                f"<td colspan='2'>{_band_text(c['live_band_rad_s'])}</td>"
+                f"<td colspan='2'>{_band_text(c['offline_band_rad_s'])}</td><td colspan='2'></td></tr>"
+                f"<tr class='info'><td>J</td><td></td><td colspan='2' class='num'>{_num(c['live_cost'], '.1f')}</td>"
+                f"<td colspan='2' class='num'>{_num(c['offline_cost'], '.1f')}</td><td colspan='2'></td></tr>")
+    return ("<table><tr><th>parameter</th><th>units</th><th>in flight</th><th>CR</th>"
+            f"<th>identify, TF {e(c['transfer_function'])}</th><th>CR</th><th>difference</th>"
+            "<th>in combined bounds</th></tr>" + "".join(rows) + "</table>")
+
+
+def _in_flight(report: dict) -> str:
+    """Each test point's model as the live monitor recorded it, and beside it the transfer function
+    of the same pair and structure this identification fitted."""
+    from livesweep.stages.live_models import AGREE_BOUNDS, MIN_OVERLAP
+
+    live = report.get("live_models") or []
+    if not live:
+        return ""
+    blocks = []
+    for m in live:
+        tp = m["test_point"]
+        what = (f"{e(str(tp.get('swept_input') or 'input'))} swept " if tp.get("swept_input") else "")
+        head = (f"<h3>Test point {e(str(tp.get('number', '?')))}: {what}{_num(tp['start_s'], '.1f')} – "
+                f"{_num(tp['end_s'], '.1f')} s" + (f" ({e(str(tp['source']))})" if tp.get("source") else "")
+                + (f", verdict {e(str(tp['verdict']))}" if tp.get("verdict") else "") + "</h3>")
+        name = Path(m["log"]).name
+        where = (f"<p class='info'>Recorded in <code>{e(name)}</code>"
+                 + (f" (record {e(m['record'])})" if m.get("record") and m["record"] != name else "")
+                 + f"; {100 * m['overlap']:.0f} % of the test point inside the record's slice."
+                 + (" Conditions: " + e(", ".join(f"{k} {_num(v, '.4g')}" for k, v in tp["conditions"].items()))
+                    + "." if tp.get("conditions") else "") + "</p>")
+        breaches = ("<ul>" + "".join(f"<li class='flag'>{e(b)}</li>" for b in m["breaches"]) + "</ul>"
+                    if m.get("breaches") else "")
+        rows = []
+        for p in m["pairs"]:
+            figs = ", ".join(f"{e(f['name'])} {e(_pm_text(f, '.3g'))}" for f in p.get("figures") or []
+                             if f.get("value") is not None)
+            flags = list(p.get("flags") or []) + [c["text"] for c in p.get("limits") or [] if not c.get("ok", True)]
+            cmp = p.get("comparison")
+            if cmp is not None:
+                verdict = ("agrees" if cmp.get("agrees") else "differs" if cmp.get("agrees") is False else "no bounds")
+                against = (f"TF {e(cmp['transfer_function'])}: {verdict}"
+                           + (f" (largest difference {_num(cmp['max_bounds'], '.2g')} combined bounds)"
+                              if cmp.get("max_bounds") is not None else ""))
+                cls = "flag" if cmp.get("agrees") is False else "pass" if cmp.get("agrees") else ""
+            else:
+                against, cls = f"not compared: {e(p.get('not_compared') or '')}", "info"
+            bad_cost = p.get("cost") is None or p["cost"] > GUIDELINES["cost_tf"]
+            rows.append(f"<tr><td>{e(p['name'])}</td><td>{e(p.get('structure') or '')}</td>"
+                        f"<td style='white-space:nowrap'>{_live_structure(p)}</td>"
+                        f"<td>{_band_text(p.get('band_rad_s'))}</td>"
+                        f"<td class='num {'flag' if bad_cost else ''}'>{_num(p.get('cost'), '.1f')}</td>"
+                        f"<td>{figs or '—'}</td><td class='{'flag' if flags else ''}'>{e('; '.join(flags))}</td>"
+                        f"<td class='{cls}'>{against}</td></tr>")
+        table = ("<table><tr><th>pair</th><th>structure</th><th>model</th><th>band [rad/s]</th><th>J</th>"
+                 "<th>figures</th><th>flags</th><th>the full identification</th></tr>" + "".join(rows) + "</table>")
+        params = "".join(f"<h4>{e(p['name'])}: parameters"
+                         + (f" in flight and in TF {e(p['comparison']['transfer_function'])}" if p.get("comparison")
+                            else " in flight") + "</h4>" + _live_comparison(p, report) for p in m["pairs"])
+        skipped = ("<p class='info'>Not modelled in flight: " + e("; ".join(m["skipped"])) + "</p>"
+                   if m.get("skipped") else "")
+        blocks.append(head + where + breaches + table + params + skipped)
+    return ("<h2 id='inflight'>In flight: the models of the test points</h2><p>The live monitor fitted each closed "
+            "test point on its own samples and recorded the model on <code>/livesweep/model</code>; those of the test "
+            f"points lying for more than {100 * MIN_OVERLAP:.0f} % inside an identify record are shown here. "
+            "Where this identification fits a transfer function of the same pair and structure, each parameter "
+            "stands beside it: the difference (in flight − identify) and that difference in units of the combined "
+            "Cramér–Rao bound "
+            f"√(CR<sub>flight</sub>² + CR<sub>identify</sub>²); beyond {AGREE_BOUNDS:g} bounds it is flagged (the "
+            "identification resamples the log itself, so the two are independent routes to the same numbers).</p>"
+            + "".join(blocks))
 
 
 def _parameter_table(params, units, removed=(), before=None) -> str:
@@ -493,12 +613,14 @@ def render(report: dict) -> str:
     toc = ("<p class='noprint'><a href='#summary'>summary</a> · <a href='#data'>data quality</a> · "
            "<a href='#responses'>frequency responses</a>" + (" · <a href='#tf'>transfer functions</a>"
                                                            if report.get("transfer_functions") else "")
+           + (" · <a href='#inflight'>in flight</a>" if report.get("live_models") else "")
            + (" · <a href='#ss'>state space</a>" if report.get("state_space") else "")
            + (" · <a href='#verification'>verification</a>" if report.get("verification") else "")
            + (" · <a href='#residual'>residual loop</a>" if report.get("residual_loop") else "")
            + " · <a href='#appendix'>method</a></p>")
     body = (_first_screen(report, summary) + toc + _data_quality(report) + _responses(report)
-            + _transfer_functions(report) + _state_space(report) + _verification(report) + _residual(report)
+            + _transfer_functions(report) + _in_flight(report) + _state_space(report) + _verification(report)
+            + _residual(report)
             + _appendix(report))
     return (f"<!doctype html><html lang='en'><head><meta charset='utf-8'><title>livesweep: {e(report['case']['name'])}"
             f"</title><style>{_CSS}</style></head><body>{body}</body></html>")

@@ -14,7 +14,8 @@ from livesweep.ident.accuracy import (MAX_COST, MAX_COST_AVERAGE, MAX_CRAMER_RAO
 from livesweep.ident.verify import J_RMS_MAX, TIC_MAX
 from livesweep.spectral.criteria import DEFAULT_CRITERIA, Criteria
 
-__all__ = ["GUIDELINES", "guidelines", "report_criteria", "stage_summary", "modes", "cr_text", "figure"]
+__all__ = ["GUIDELINES", "guidelines", "report_criteria", "stage_summary", "modes", "cr_text", "figure",
+           "live_models_info"]
 
 #: The guidelines the flags test (method: Tischler & Remple; the report's appendix), with the
 #: method's criteria; a report judged by other criteria reads them through :func:`guidelines`.
@@ -80,6 +81,34 @@ def modes(eigenvalues) -> list[dict]:
     return rows
 
 
+def live_models_info(report: dict) -> list[str]:
+    """Lines on the models the live monitor recorded for the report's test points
+    (``live_models``): how many, how the compared pairs stand against the transfer functions (in
+    combined Cramer-Rao bounds), the limits broken in flight. Empty without live models."""
+    from livesweep.stages.live_models import AGREE_BOUNDS
+
+    live = report.get("live_models") or []
+    if not live:
+        return []
+    pairs = [(m, p) for m in live for p in m["pairs"]]
+    compared = [(m, p["comparison"]) for m, p in pairs if p.get("comparison")]
+    text = (f"in flight: {len(pairs)} pair model(s) of {len(live)} test point(s) recorded in the logs "
+            "(see In flight)")
+    if compared:
+        differ = [f"{c['pair']} of TP{m['test_point'].get('number', '?')} ({c['max_bounds']:.2g})"
+                  for m, c in compared if c.get("agrees") is False]
+        worst = max((c["max_bounds"] for _, c in compared if c.get("max_bounds") is not None), default=None)
+        text += (f"; {len(compared)} compared with the transfer functions: "
+                 + (f"{len(differ)} differ by more than {AGREE_BOUNDS:g} combined bounds: " + ", ".join(differ)
+                    if differ else f"all within {AGREE_BOUNDS:g} combined bounds"
+                    + (f" (largest {worst:.2g})" if worst is not None else "")))
+    out = [text]
+    breaches = [b for m in live for b in m.get("breaches") or []]
+    if breaches:
+        out.append(f"{len(breaches)} limit(s) broken in flight: " + "; ".join(breaches))
+    return out
+
+
 def _row(stage, result, flags, info=()):
     return {"stage": stage, "result": result, "flags": list(flags), "info": list(info),
             "status": "flag" if flags else "pass"}
@@ -119,6 +148,8 @@ def stage_summary(report: dict) -> list[dict]:
             info.append(f"{rep:.0f} sample repair(s) (see data quality)")
         info += list(dq.get("notes") or [])
         good = len(ex) - len(poor)
+        if "transfer-functions" not in ran:
+            info += live_models_info(report)
         out.append(_row("frequency-response", f"{len(report.get('frequency_responses') or [])} pairs; {good} of {len(ex)} "
                         f"adequate (γ² ≥ {g['coherence']}, ε ≤ {g['random_error']}) over at least "
                         f"{100 * g['coverage']:.0f} % of the band", flags, info))
@@ -145,7 +176,7 @@ def stage_summary(report: dict) -> list[dict]:
                 if w is not None and len(band) == 2 and band[0] and (abs(w) < band[0] / 10 or abs(w) > band[1] * 10):
                     flags.append(f"{t['name']}: a root at {abs(w):.3g} rad/s, a decade outside the fitted band "
                                  f"{band[0]:.3g}-{band[1]:.3g} rad/s (not determined by the data)")
-        out.append(_row("transfer-functions", "; ".join(parts), flags))
+        out.append(_row("transfer-functions", "; ".join(parts), flags, live_models_info(report)))
     final = report.get("model") or {}
     looped = final.get("source") == "residual-loop"
     if "state-space" in ran:

@@ -19,6 +19,7 @@ from livesweep.report.chart import bode_chart, residual_chart, time_history_char
 from livesweep.report.html import render as render_html
 from livesweep.report.svg import to_svg
 from livesweep.report.units import parameter_units
+from livesweep.stages.live_models import live_models_section
 
 __all__ = ["write_report", "write_frequency_report", "prepare_out_dir", "save_response_set", "load_response_set",
            "RESPONSE_SET_FILE"]
@@ -118,11 +119,11 @@ def write_report(identification, out_dir, *, plots: bool = True) -> Path:
     i = identification
     return write_frequency_report(i.frequency_response, out_dir, transfer_functions=i.transfer_functions,
                                   state_space=i.state_space, verification=i.verification, residual=i.residual,
-                                  plots=plots)
+                                  live_models=getattr(i, "live_models", None), plots=plots)
 
 
 def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_space=None, verification=None,
-                           residual=None, plots: bool = True) -> Path:
+                           residual=None, live_models=None, plots: bool = True) -> Path:
     """Write the report of the stages run; returns the path of ``report.json``.
 
     Parameters
@@ -137,6 +138,10 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
     residual : ResidualStage, optional
         The residual loop (``.loop``): ``residual_loop`` in the JSON, residual plots per step and,
         when it added an effect, ``augmented_case.toml`` (the case with the augmented model).
+    live_models : LiveModels, optional
+        The models the live monitor recorded for the records' test points
+        (:func:`livesweep.stages.live_models.read_live_models`): ``live_models`` in the JSON, each
+        pair beside the transfer function of the same pair and structure; an empty list without.
     """
     out = prepare_out_dir(out_dir)
     case, an = stage.case, stage.analysis
@@ -189,6 +194,9 @@ def write_frequency_report(stage, out_dir, *, transfer_functions=None, state_spa
                                                                          ss_fit if changed else None, best, units)}
                                         for f in tf_fits]
         report["data_quality"]["notes"] += list(transfer_functions.notes)
+    report["live_models"] = live_models_section(live_models, tf_fits)
+    if live_models is not None:
+        report["data_quality"]["notes"] += list(live_models.notes)
     if ss_fit is not None:
         stages.append("state-space")
         report["state_space"] = _model_dict(ss_fit, case.tables["state_space"], units)

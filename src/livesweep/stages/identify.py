@@ -22,6 +22,7 @@ from livesweep.errors import ConfigError
 from livesweep.stages import STAGES
 from livesweep.stages.background import Background
 from livesweep.stages.frequency_response import FrequencyResponseStage, run_frequency_response_stage
+from livesweep.stages.live_models import read_live_models
 from livesweep.stages.parametric import (StateSpaceStage, TransferFunctionStage, VerificationStage,
                                            run_state_space_stage, run_transfer_function_stage,
                                            run_verification_stage, transfer_function_specs)
@@ -83,6 +84,10 @@ class Identification:
         The stages that ran (names from :data:`STAGES`).
     elapsed_s : float
         Wall time of the stages [s].
+    live_models : LiveModels or None
+        The models the live monitor recorded (``/livesweep/model``) for the test points inside
+        the ``[[identify]]`` records (:mod:`livesweep.stages.live_models`); the report sets them
+        beside the transfer functions.
     """
 
     case: Case
@@ -94,6 +99,7 @@ class Identification:
     specs: CaseSpecs
     stages: tuple
     elapsed_s: float
+    live_models: object = None
 
     @property
     def responses(self):
@@ -135,7 +141,8 @@ def identify(case: Case | str | Path, *, until: str = "residual-loop",
 
     Stages run in the order of :data:`STAGES` up to ``until``; each runs only when the case
     defines it (``[transfer_functions]``, ``[state_space]``, ``[[verify]]``, ``[residual]``
-    enabled). Nothing is written to disk.
+    enabled). The models the live monitor recorded in the logs for the test points inside the
+    records (``/livesweep/model``) are read too (``live_models``). Nothing is written to disk.
 
     Parameters
     ----------
@@ -171,6 +178,7 @@ def identify(case: Case | str | Path, *, until: str = "residual-loop",
     t0 = time.monotonic()
     say(f"{case.name}: frequency responses from {len(case.identify)} record(s)")
     fr = run_frequency_response_stage(case, parallel=parallel)
+    live = read_live_models(case.identify)
     best = fr.analysis.best
     ran = ["frequency-response"]
     tf = ss = ver = res = None
@@ -197,5 +205,5 @@ def identify(case: Case | str | Path, *, until: str = "residual-loop",
             ran.append("residual-loop")
     if pending is not None:
         tf = pending.result()
-    return Identification(case, fr, tf, ss, ver, res, specs, tuple(ran), time.monotonic() - t0)
+    return Identification(case, fr, tf, ss, ver, res, specs, tuple(ran), time.monotonic() - t0, live)
 
