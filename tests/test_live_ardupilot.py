@@ -243,6 +243,19 @@ def test_a_chirp_cut_to_a_third_is_no_go_naming_the_band_never_swept_and_the_los
     assert w_cut * 0.97 <= lo <= w_cut * 1.03, (gap, w_cut)
     assert all(v["verdict"] != "GO" for v in res["verdicts"])
 
+    # what to fly next: the band never reached, the SID_* parameters that cover it (the chirp's
+    # own: it was cut, not badly designed), and to hold SystemID to its end
+    nxt = tp["next"]
+    assert nxt["needed"]
+    [band] = [m for m in nxt["missing"] if m["cause"] == "not_swept"]
+    assert w_cut * 0.9 <= band["band_rad_s"][0] <= w_cut * 1.03, (band, w_cut)
+    assert band["band_rad_s"][1] == pytest.approx(min(w_hi, tp["judged_band_rad_s"][1]), rel=1e-3)
+    ap = nxt["ardupilot"]
+    assert ap["SID_F_START_HZ"] <= band["band_rad_s"][0] / (2 * math.pi)
+    assert ap["SID_F_STOP_HZ"] >= band["band_rad_s"][1] / (2 * math.pi) * (1 - 1e-3)
+    assert ap["SID_T_REC"] >= 40.0
+    assert any("SystemID Finished" in line for line in nxt["lines"]), nxt["lines"]
+
 
 def _without_system(path: Path, out: Path, sysid: int) -> int:
     """Copy a recording without the messages of ``sysid``; returns how many were left out."""

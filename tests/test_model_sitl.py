@@ -180,3 +180,41 @@ def _ctun_alt(log: Path, start_s: float, end_s: float) -> float:
         if start_s <= msg.TimeUS * 1e-6 <= end_s:
             vals.append(msg.Alt)
     return sum(vals) / len(vals)
+
+
+def test_the_model_is_published_on_zenoh_as_recorded(logs, live):
+    """A real Zenoh session on loopback subscribes to ``livesweep/model`` while the pipeline runs
+    the roll log with a publisher: it receives the model the replay recorded, as JSON."""
+    import json
+    import threading
+    import time
+
+    import zenoh
+
+    from livesweep.monitor.pipeline import MonitorPipeline
+    from livesweep.telemetry.replay import McapReplaySource
+    from livesweep.telemetry.zenoh_io import ZenohPublisher
+    from test_zenoh_io import plain_config, wait_peer, with_free_port
+
+    got, lock = [], threading.Lock()
+
+    def on_sample(s):
+        with lock:
+            got.append(json.loads(s.payload.to_bytes()))
+
+    session, port = with_free_port(lambda p: zenoh.open(plain_config(listen=p)))
+    sub = session.declare_subscriber("livesweep/model", on_sample)
+    pub = ZenohPublisher(connect_port=port)
+    try:
+        wait_peer(pub.session)
+        MonitorPipeline(live["roll"].settings, [McapReplaySource(logs["roll"])], publisher=pub,
+                        keep_estimates=False).run()
+        deadline = time.monotonic() + 5
+        while not got and time.monotonic() < deadline:
+            time.sleep(0.02)
+    finally:
+        pub.close()
+        sub.undeclare()
+        session.close()
+    assert pub.published.get("model") == 1
+    assert got == [json.loads(json.dumps(live["roll"].models[0]))]

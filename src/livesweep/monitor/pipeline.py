@@ -181,7 +181,7 @@ class MonitorPipeline(FrameIntake, EstimateStep, Verdicts, MapCheck, LinkReport,
         self._topics_seen: dict = {}                    # topic -> (frames taken, the first one's data)
         self._analysed: dict[str, bool] = {}            # topic -> the analysis uses it
         self._wanted = {spec.topic for spec in self.aligner.specs.values()} | set(self.aligner.stamp_topics)
-        named = settings.test_points.conditions if settings.test_points is not None else ()
+        named = getattr(settings.test_points, "conditions", ()) if settings.test_points is not None else ()
         self.conditions = ConditionMeans({n: settings.signals[n] for n in named}) if named else None
         if self.conditions is not None:
             self._wanted |= self.conditions.topics

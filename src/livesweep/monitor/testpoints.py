@@ -58,6 +58,7 @@ from livesweep.monitor.systemid import TOPICS as SYSTEMID_TOPICS
 from livesweep.monitor.vehicle import VehicleInfo, axis_name
 from livesweep.spectral.criteria import DEFAULT_CRITERIA, Criteria
 from livesweep.spectral.injection import SweepInjection
+from livesweep.spectral.recommend import Recommendation, recommend_next
 from livesweep.spectral.verdict import DataLoss, TestPointJudgement, judge_test_point
 from livesweep.telemetry.frames import Frame
 
@@ -162,6 +163,7 @@ class TestPoint:
     judgement: TestPointJudgement | None = None
     running: TestPointJudgement | None = None    # the last running judgement
     criteria: Criteria = DEFAULT_CRITERIA        # what judges it (the map's [criteria])
+    recommendation: Recommendation | None = None   # what to fly next (the closing judgement's)
 
     def samples(self) -> tuple[np.ndarray, np.ndarray]:
         """Its samples so far, (values (n_signals, n), valid (n,))."""
@@ -189,7 +191,8 @@ class TestPoint:
                "axis": self.axis, "verdict": "WAIT", "label": "WAIT", "marginal": False,
                "running": None if self.running is None else self.running.label,
                "injection": None if self.injection is None else self.injection.to_dict(),
-               "pairs": [], "missing": [], "reasons": [], "criteria": self.criteria.to_dict()}
+               "pairs": [], "missing": [], "reasons": [], "criteria": self.criteria.to_dict(),
+               "next": None}
         if state == "closed":
             out["verdict"] = out["label"] = "NO-GO" if j is None or self.lost or self.unjudged else j.verdict
         if j is not None:
@@ -200,6 +203,8 @@ class TestPoint:
                        excitation=d["excitation"], progress=j.progress(), loss_fraction=d["loss_fraction"])
             if state == "closed" and out["verdict"] == j.verdict:
                 out.update(label=j.label, marginal=j.marginal)
+        if state == "closed" and self.recommendation is not None and not self.unjudged:
+            out["next"] = self.recommendation.to_dict()
         if state == "closed":
             why = [x for x in (self.unjudged, self.lost) if x]
             if why:
@@ -634,6 +639,9 @@ class TestPointTracker:
                                                                     valid, last, rates))
         if final:
             tp.judgement = j
+            row = self.references.get(swept) or swept          # where the sweep itself is seen
+            tp.recommendation = recommend_next(j, input_samples=(values[self.names.index(row)], self.fs)) \
+                if row in self.names else recommend_next(j)
         else:
             tp.running = j
         self.judgements[round(tp.start_s, 6)] = j

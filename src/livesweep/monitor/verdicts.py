@@ -36,6 +36,12 @@ def tracker_for(settings: MonitorSettings, names) -> TestPointTracker:
                             references=refs, criteria=settings.criteria)
 
 
+def _next_lines(rec: dict) -> list:
+    """What to fly next, when the test point needs more (its record's ``next``)."""
+    nxt = rec.get("next")
+    return list(nxt["lines"]) if nxt and nxt.get("needed") else []
+
+
 class Verdicts:
     """Test points shown, published and recorded, and the operator's verdict (mixin of
     :class:`~livesweep.monitor.pipeline.MonitorPipeline`, whose ``__init__`` sets the state these
@@ -125,7 +131,8 @@ class Verdicts:
             return "WAIT", (f"test point running: {who}: {rec['running']}, {rec.get('progress', '')}".rstrip(", "),
                             *rec["reasons"]), rec
         return rec["verdict"], (f"last test point ({who} {time_text(rec['start_s'])} - {time_text(rec['end_s'])}): "
-                                f"{rec['label']}", *rec.get("limits", ()), *rec["missing"], *rec["reasons"]), rec
+                                f"{rec['label']}", *rec.get("limits", ()), *rec["missing"], *_next_lines(rec),
+                                *rec["reasons"]), rec
 
     def _update_verdict(self, t_s: float, rec: dict | None = None) -> None:
         verdict, reasons, rec = self._operator_verdict(rec)
