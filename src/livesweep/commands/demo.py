@@ -52,7 +52,11 @@ def cmd_demo(args) -> int:
     import subprocess
     import time
 
+    import tomllib
+
     from livesweep.config import load_channel_map
+    from livesweep.ident.envelope import ModelSettings
+    from livesweep.stages.parametric import specs_of_tables
     from livesweep.locks import folder_lock
     from livesweep.monitor.pipeline import MonitorSettings
     from livesweep.monitor.session import monitor
@@ -72,8 +76,12 @@ def cmd_demo(args) -> int:
     print(f"livesweep {__version__} demo: {SAMPLE_LOGS[name][0]}")
     print(f"  writing to {out_dir}")
     signals, _ = load_channel_map(CHANNELS)
+    signals_text = CHANNELS.read_text()
+    case_text = DEMO_CASE.format(signals=signals_text[signals_text.index("[signals.da]"):signals_text.index("[spectral]")])
+    tables = tomllib.loads(case_text)["transfer_functions"]     # each test point's model: the case's structure
     settings = MonitorSettings(signals=signals, inputs=("da",), outputs=("p", "r", "ay", "beta"), band_rad_s=(0.3, 20.0),
-                               sample_rate_hz=50.0, window_s=240.0, required_pairs=(("p", "da"),))
+                               sample_rate_hz=50.0, window_s=240.0, required_pairs=(("p", "da"),),
+                               models=ModelSettings(specs_of_tables(tables, "the demo case"), tables=tables))
     log = out_dir / "live.mcap"
     rrd = out_dir / "live.rrd"
     live = monitor("udpin:127.0.0.1:0", settings, record=log, overwrite=True,     # the demo rewrites its own folder
@@ -102,9 +110,8 @@ def cmd_demo(args) -> int:
     print(f"  recording: {log} (Foxglove: open it and import the layout {live.layout.name})"
           + ("" if args.view else f"\n  rerun: {rrd} (open with: {command_name('rerun')} {rrd})"))
     print()
-    signals_text = CHANNELS.read_text()
     case = out_dir / "demo_case.toml"
-    case.write_text(DEMO_CASE.format(signals=signals_text[signals_text.index("[signals.da]"):signals_text.index("[spectral]")]))
+    case.write_text(case_text)
     report_dir = out_dir / "report"
     with folder_lock(prepare_out_dir(report_dir)):
         progress = progress_printer()

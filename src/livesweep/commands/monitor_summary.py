@@ -42,6 +42,22 @@ def _loss_text(src: dict) -> str:
     return "loss: " + "; ".join(parts) if parts else ""
 
 
+def model_lines(model: dict | None) -> list[str]:
+    """A test point's ``/livesweep/model`` record in lines: per pair its structure, each parameter
+    with its bound, J and the flags; then each limit it broke."""
+    if not model:
+        return []
+    out = []
+    for p in model["pairs"]:
+        params = ", ".join(f"{q['name']} {q['value']:.4g}" + ("" if q["cramer_rao"] is None else f" ± {q['cramer_rao']:.2g}")
+                           + (f" {q['units']}" if q["units"] else "") for q in p["parameters"] if q["value"] is not None)
+        cost = "" if p["cost"] is None else f"; J {p['cost']:.3g}"
+        flags = f"; not to trust: {'; '.join(p['flags'])}" if p["flags"] else ""
+        out.append(f"model {p['name']} ({p['structure']}): {params}{cost}{flags}")
+    out += [f"LIMIT: {b}" for b in model["breaches"]]
+    return out
+
+
 def print_monitor_summary(summary: dict, out=None) -> None:
     """Print the summary of a monitor run (:meth:`livesweep.Monitor.stop`, :attr:`livesweep.ReplayResult.summary`)."""
     from livesweep.monitor.pipeline import LINK_ANOMALIES
@@ -81,8 +97,15 @@ def print_monitor_summary(summary: dict, out=None) -> None:
 
     tps = summary.get("test_points") or []
     print(f"  test points: {len(tps)}" + ("" if tps else " (no sweep, SystemID run or marker seen)"), file=out)
+    models = {m["test_point"]["number"]: m for m in summary.get("models") or ()}
     for k, tp in enumerate(tps, 1):
         print(f"    {test_point_line(k, tp)}", file=out)
+        for line in model_lines(models.get(k)):
+            print(f"      {line}", file=out)
+        nxt = tp.get("next")
+        if nxt and nxt.get("needed"):
+            for line in nxt["lines"]:
+                print(f"      next: {line}", file=out)
     if summary["verdict"]:
         print(f"  verdict: {summary['verdict']}", file=out)
     for line in summary.get("map_problems") or ():
