@@ -18,7 +18,8 @@ import rerun.blueprint as rrb
 from rerun.chunk import RrdReader
 
 from livesweep.monitor.blueprint import (
-    ADEQUACY_PATH, ALERTS_PATH, FOCUS_PATH, FRACTION_PATH, TEST_POINTS_PATH, coherence_path, default_blueprint,
+    ADEQUACY_PATH, ALERTS_PATH, FOCUS_PATH, FRACTION_PATH, MODEL_BODE_PATH, MODEL_SUMMARY_PATH, MODEL_TREND_PATH,
+    MODEL_TREND_PLOT_PATH, TEST_POINTS_PATH, coherence_path, default_blueprint,
     magnitude_path, pair_path, phase_path, plot_box, plot_margins, sweep_frequency_path, telemetry_path, time_remaining_path,
     waterfall_path,
 )
@@ -515,7 +516,7 @@ def test_blueprint_is_pure_and_covers_every_entity(recorded):
     assert rr.get_global_data_recording() is None        # built without creating or touching a recording
     assert isinstance(bp, rrb.Blueprint)
     views = _views(bp)
-    assert len(views) == 9 + 2 * len(INPUTS) * len(OUTPUTS)        # the test-point tab, and every pair's
+    assert len(views) == 13 + 2 * len(INPUTS) * len(OUTPUTS)       # the test-point and model tabs, and every pair's
     # the same inputs give the same layout (names, kinds, origins)
     again = _views(default_blueprint(INPUTS, OUTPUTS))
     assert [(type(v), v.name, v.origin, v.contents) for v in views] == \
@@ -527,13 +528,15 @@ def test_blueprint_is_pure_and_covers_every_entity(recorded):
     assert {str(v.origin) for v in by_type["TimeSeriesView"]} == {
         "/telemetry/inputs", "/telemetry/outputs", "/" + FRACTION_PATH, "/status/sweep_frequency",
         "/status/time_remaining"}
-    assert [str(v.origin) for v in by_type["TextDocumentView"]] == ["/" + ADEQUACY_PATH, "/" + TEST_POINTS_PATH]
+    assert [str(v.origin) for v in by_type["TextDocumentView"]] == ["/" + ADEQUACY_PATH, "/" + TEST_POINTS_PATH,
+                                                                     "/" + MODEL_SUMMARY_PATH, "/" + MODEL_TREND_PATH]
     assert [str(v.origin) for v in by_type["TextLogView"]] == ["/" + ALERTS_PATH]
     assert "BarChartView" not in by_type                   # coherence is drawn on the log frequency axis
     assert {str(v.origin) for v in by_type["TensorView"]} == {"/" + waterfall_path(o, i)
                                                              for o in OUTPUTS for i in INPUTS}
     assert {str(v.origin) for v in by_type["Spatial2DView"]} == {"/" + pair_path(o, i)
-                                                                for o in OUTPUTS for i in INPUTS} | {"/" + FOCUS_PATH}
+                                                                for o in OUTPUTS for i in INPUTS} | {
+        "/" + FOCUS_PATH, "/" + MODEL_BODE_PATH, "/" + MODEL_TREND_PLOT_PATH}
     # every entity the view wrote is shown by a view of the right kind
     kinds = {"telemetry": "TimeSeriesView", "coherence": "Spatial2DView", "waterfall": "TensorView",
              "magnitude_db": "Spatial2DView", "phase_deg": "Spatial2DView", "sweep_frequency": "TimeSeriesView",

@@ -28,6 +28,20 @@ Entity layout (every path below is relative to the recording root; Rerun shows i
     status/time_remaining/<input>      Scalars: sweep time still needed to the band's top [s]
     status/test_points                 TextDocument: the test points (open one first, then the closed ones)
     status/alerts                      TextLog, level WARN
+    model/summary                      TextDocument: the last closed test point's model (breaches first,
+                                       per pair structure, band, J, parameters and figures with their
+                                       Cramer-Rao bounds and flags, limits)
+    model/trend                        TextDocument: each pair's values over the test points, the notes
+    model/bode/<out>_<in>/magnitude_db, .../phase_deg
+                                       display transform of one pair's Bode plot; children data
+                                       (Points2D, (log10 omega, value)), model (LineStrips2D), prediction
+                                       (dashed LineStrips2D) and grid; model/bode/<out>_<in>/title
+    model/bode/legend                  labels (Points2D) naming the colours of data, model and prediction;
+                                       children dots and lines: the samples of those colours
+    model/trend_plot/<out>_<in>/<quantity>
+                                       display transform of one quantity against the test-point number;
+                                       children points (Points2D), bounds (LineStrips2D, value ± bound),
+                                       line (LineStrips2D joining the values) and grid
 
 The three frequency plots of a pair are drawn in a fixed box of display units
 (:func:`plot_box`), so each view's visual bounds are fixed here and the data are mapped into the
@@ -51,7 +65,9 @@ __all__ = [
     "TIME_REMAINING_PATH", "FOCUS_PATH", "BAND_EDGE_PATHS", "telemetry_path", "pair_path", "coherence_path",
     "magnitude_path", "phase_path",
     "waterfall_path", "sweep_frequency_path", "time_remaining_path", "pair_label", "check_names", "plot_box",
-    "plot_margins", "PLOT_MARGINS", "default_blueprint",
+    "plot_margins", "PLOT_MARGINS", "default_blueprint", "MODEL_PATH", "MODEL_SUMMARY_PATH", "MODEL_TREND_PATH",
+    "MODEL_BODE_PATH", "MODEL_TREND_PLOT_PATH", "MODEL_LEGEND_PATH", "model_pair_path", "model_trend_plot_path",
+    "model_box", "trend_box", "TREND_COLUMNS", "MODEL_TITLE_Y", "MODEL_LEGEND_Y",
 ]
 
 TIMELINE = "flight_time"
@@ -65,6 +81,14 @@ TIME_REMAINING_PATH = "status/time_remaining"
 FOCUS_PATH = "focus"
 #: The edges of the band the running test point is judged over, drawn with the sweep frequency.
 BAND_EDGE_PATHS = (f"{SWEEP_FREQUENCY_PATH}/judged_band_low", f"{SWEEP_FREQUENCY_PATH}/judged_band_high")
+
+#: The "Model" tab: the last closed test point's model (entity paths under :data:`MODEL_PATH`).
+MODEL_PATH = "model"
+MODEL_SUMMARY_PATH = f"{MODEL_PATH}/summary"
+MODEL_TREND_PATH = f"{MODEL_PATH}/trend"
+MODEL_BODE_PATH = f"{MODEL_PATH}/bode"
+MODEL_TREND_PLOT_PATH = f"{MODEL_PATH}/trend_plot"
+MODEL_LEGEND_PATH = f"{MODEL_BODE_PATH}/legend"
 
 #: Display units around each frequency plot's box for its tick labels, (left, right, top, bottom),
 #: for one input column; with n inputs the columns are n times narrower, so the margins (which
@@ -120,6 +144,70 @@ def sweep_frequency_path(input: str) -> str:  # noqa: A002
 def time_remaining_path(input: str) -> str:  # noqa: A002
     """``status/time_remaining/<input>``: sweep time still needed to reach the band's top [s]."""
     return f"{TIME_REMAINING_PATH}/{rr.escape_entity_path_part(str(input))}"
+
+
+def model_pair_path(output: str, input: str) -> str:  # noqa: A002
+    """``model/bode/<out>_<in>``: one pair's Bode plots of the model tab."""
+    return f"{MODEL_BODE_PATH}/{rr.escape_entity_path_part(f'{output}_{input}')}"
+
+
+def model_trend_plot_path(output: str, input: str, quantity: str) -> str:  # noqa: A002
+    """``model/trend_plot/<out>_<in>/<quantity>``: one quantity of a pair against the test-point number."""
+    return (f"{MODEL_TREND_PLOT_PATH}/{rr.escape_entity_path_part(f'{output}_{input}')}/"
+            f"{rr.escape_entity_path_part(str(quantity))}")
+
+
+#: Height of each Bode box of the model tab, the space above the magnitude box, and where each
+#: column's title and the legend sit in it (display units, y down from the box's top).
+_BODE_HEIGHT = 220.0
+_BODE_HEAD = 135.0
+MODEL_TITLE_Y = -112.0
+MODEL_LEGEND_Y = -70.0
+#: Height of the trend plots' rows together, and how many quantities each pair's row shows.
+_TREND_HEIGHT = 300.0
+TREND_COLUMNS = 3
+
+
+def _slots(total: float, n: int, margin: float) -> tuple[float, float]:
+    """(slot, box) sizes of ``n`` equal boxes that share ``total`` display units, each with
+    ``margin`` units of labels beside it."""
+    slot = total / max(1, int(n))
+    return slot, max(slot - margin, 1.0)
+
+
+def model_box(kind: str, column: int, n_columns: int) -> tuple[float, float, float, float]:
+    """``(x, y, width, height)`` of a Bode box of the model tab (display units, y down).
+
+    kind is ``"magnitude"`` or ``"phase"`` (stacked in that order); the pairs of the test point
+    sit side by side in ``n_columns`` columns that share the view's fixed width.
+    """
+    if kind not in ("magnitude", "phase"):
+        raise ValueError(f"model plot kind must be 'magnitude' or 'phase', got {kind!r}")
+    left, right, top, bottom = PLOT_MARGINS
+    slot, w = _slots(_PLOT_WIDTH + left + right, n_columns, left + right)
+    y = 0.0 if kind == "magnitude" else _BODE_HEIGHT + bottom + top
+    return column * slot, y, w, _BODE_HEIGHT
+
+
+def trend_box(row: int, column: int, n_rows: int) -> tuple[float, float, float, float]:
+    """``(x, y, width, height)`` of a trend plot of the model tab (display units, y down): one row
+    per pair (``n_rows`` share the view's fixed height), one of :data:`TREND_COLUMNS` quantities
+    per column."""
+    left, right, top, bottom = PLOT_MARGINS
+    slot_x, w = _slots(_PLOT_WIDTH + left + right, TREND_COLUMNS, left + right)
+    slot_y, h = _slots(_TREND_HEIGHT + top + bottom, n_rows, top + bottom)
+    return column * slot_x, row * slot_y, w, h
+
+
+def _model_bounds() -> rrb.VisualBounds2D:
+    left, right, top, bottom = PLOT_MARGINS
+    _, y, _, h = model_box("phase", 0, 1)
+    return rrb.VisualBounds2D(x_range=(-left, _PLOT_WIDTH + right), y_range=(-_BODE_HEAD, y + h + bottom))
+
+
+def _trend_bounds() -> rrb.VisualBounds2D:
+    left, right, top, bottom = PLOT_MARGINS
+    return rrb.VisualBounds2D(x_range=(-left, _PLOT_WIDTH + right), y_range=(-top, _TREND_HEIGHT + bottom))
 
 
 def plot_margins(n_inputs: int) -> tuple[float, float, float, float]:
@@ -208,19 +296,43 @@ def _pair_views(output: str, input: str, n_inputs: int, min_coherence: float) ->
     )
 
 
+def _model_tab() -> rrb.Horizontal:
+    """The model of the last closed test point: its fit over the data's Bode plots and its trend
+    plots beside the numbers and the trend table."""
+    plots = rrb.Vertical(
+        rrb.Spatial2DView(origin="/" + MODEL_BODE_PATH,
+                          name="Model of the last test point over its data (|H| [dB], phase [deg] vs ω [rad/s])",
+                          visual_bounds=_model_bounds()),
+        rrb.Spatial2DView(origin="/" + MODEL_TREND_PLOT_PATH,
+                          name="Trend: value ± Cramér-Rao bound against the test point",
+                          visual_bounds=_trend_bounds()),
+        row_shares=[1.6, 1.0],
+    )
+    text = rrb.Vertical(
+        rrb.TextDocumentView(origin="/" + MODEL_SUMMARY_PATH, name="Model: parameters, figures, limits"),
+        rrb.TextDocumentView(origin="/" + MODEL_TREND_PATH, name="Trend over the flight"),
+        row_shares=[1.5, 1.0],
+    )
+    return rrb.Horizontal(plots, text, column_shares=[1.45, 1.0], name="Model")
+
+
 def default_blueprint(inputs: Sequence[str], outputs: Sequence[str], *,
-                      history_s: float = 30.0, min_coherence: float = DEFAULT_CRITERIA.min_coherence) -> rrb.Blueprint:
+                      history_s: float = 30.0, min_coherence: float = DEFAULT_CRITERIA.min_coherence,
+                      active_tab: str | None = None) -> rrb.Blueprint:
     """The default layout of the live view. Pure: builds objects, logs nothing.
 
-    Two tabs. **Test point** (what the operator judges from), three columns: the verdict (with how
+    Three tabs. **Test point** (what the operator judges from), three columns: the verdict (with how
     far behind the link the view is), the test points and the alerts; the swept pair of the test
     point running or the last one, as its verdict judged it (coherence, Bode magnitude and phase
     over the judged band), the sweep frequency against the band judged, and the adequate
     fraction; the input and output time series (last ``history_s`` seconds of flight time) and the
-    sweep time still needed. **All pairs**: one tab per output, each with one column per input
+    sweep time still needed. **Model**: the model of the last closed test point (its fit over the
+    data's Bode plots, its parameters and figures with their bounds, its limits) and the trend of
+    its values over the flight. **All pairs**: one tab per output, each with one column per input
     holding that pair's sliding-window coherence, Bode magnitude and phase (one view) and its
     coherence waterfall. The time panel starts collapsed (its time bar stays). ``min_coherence``:
     the criteria's coherence threshold, named in the pair views' titles (below it is drawn grey).
+    ``active_tab``: the name of the tab shown first (None: the first, "Test point").
     """
     inputs, outputs = list(inputs), list(outputs)
     check_names(inputs, outputs)
@@ -254,8 +366,12 @@ def default_blueprint(inputs: Sequence[str], outputs: Sequence[str], *,
     tabs = [rrb.Horizontal(*[_pair_views(o, i, n_in, min_coherence) for i in inputs], name=o) for o in outputs]
     pairs = rrb.Tabs(*tabs, name="All pairs (sliding window)") if tabs else rrb.Tabs(name="All pairs (sliding window)")
     main = rrb.Horizontal(status, focus, series, column_shares=[1.0, 1.25, 0.9], name="Test point")
+    top = [main, _model_tab(), pairs]
+    names = [str(t.name) for t in top]
+    if active_tab is not None and active_tab not in names:
+        raise ValueError(f"active_tab must be one of {names}, got {active_tab!r}")
     return rrb.Blueprint(
-        rrb.Tabs(main, pairs),
+        rrb.Tabs(*top, active_tab=None if active_tab is None else names.index(active_tab)),
         rrb.TimePanel(timeline=TIMELINE, play_state="following", state="collapsed"),
         collapse_panels=True,
         auto_views=False,

@@ -17,6 +17,8 @@ What the engineer sees, and how each item is represented (entity paths: :mod:`.b
   [s] (NaN while unknown).
 * **Test points**: a markdown ``rr.TextDocument`` with the open test point and the closed ones.
 * **Alerts**: ``rr.TextLog`` at level WARN, text ``"[kind] message"``.
+* **Model** of each closed test point (its fit over the data's Bode plots, its numbers, the trend
+  over the flight): drawn by :mod:`.rerun_model`, which describes them.
 
 Costs: ``rr.log`` with archetype objects costs ~0.3-1.4 ms per spectral entity (the Python-side
 conversion), i.e. >100 ms per update for 48 pairs. The hot path therefore logs ready Arrow arrays
@@ -43,7 +45,7 @@ import numpy as np
 import pyarrow as pa
 import rerun as rr
 
-from livesweep.monitor import rerun_compat
+from livesweep.monitor import rerun_compat, rerun_model
 from livesweep.monitor.blueprint import (
     ADEQUACY_PATH, ALERTS_PATH, BAND_EDGE_PATHS, FOCUS_PATH, FRACTION_PATH, TEST_POINTS_PATH, TIMELINE, check_names,
     default_blueprint, pair_label, sweep_frequency_path, telemetry_path, time_remaining_path,
@@ -136,6 +138,7 @@ class RerunView:
         self._n_test_points = 0
         self._epoch: bool | None = None       # flight_time as a UNIX timestamp (decided by the first time)
         self._focus: PairState | None = None  # the swept pair of the test point (focus/)
+        self._model: rerun_model.ModelPanel | None = None   # the "Model" tab
         self._early_alerts: list = []          # alerts before any flight time: logged at the first one
         self._band_named = False
         self._status: dict | None = None              # the last estimate's status table (re-shown on a verdict change)
@@ -430,6 +433,19 @@ class RerunView:
             self._set_time(t_s)
             self.rec.log(TEST_POINTS_PATH, rr.TextDocument(markdown_test_points(entries, t_s),
                                                            media_type=rr.MediaType.MARKDOWN))
+
+    def log_model(self, t_s: float, record: dict) -> None:
+        """The model of a closed test point at flight time ``t_s`` [s] (the "Model" tab): ``record``
+        the monitor's ``/livesweep/model`` record (docs/outputs.md), drawn by
+        :class:`.rerun_model.ModelPanel` in place of the one before. Optional parts may be missing."""
+        with self._lock:
+            self._check_open()
+            if not isinstance(record, dict):
+                raise TypeError(f"record must be a dict (the /livesweep/model record), got {type(record).__name__}")
+            self._set_time(t_s)
+            if self._model is None:
+                self._model = rerun_model.ModelPanel(self.rec)
+            self._model.log(record)
 
     def log_alerts(self, t_s: float | None, alerts: Sequence[tuple[str, str]]) -> None:
         """Alerts as WARN text-log lines ``"[kind] message"`` at flight time ``t_s``; alerts before
