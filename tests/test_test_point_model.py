@@ -175,3 +175,40 @@ def test_the_record_follows_the_channel_schema():
               "trend": [], "trend_notes": []}
     _validate(RESULT_SCHEMAS["model"], record)
     assert record["breaches"] and not record["limits_ok"]
+
+
+def test_a_state_space_prediction_is_the_analytic_response_and_is_held_against_the_data():
+    wn, zeta, tau = 40.0, 0.6, 0.012
+    A = [[0.0, 1.0], [-wn * wn, -2 * zeta * wn]]
+    ss = {"a": A, "b": [[0.0], [wn * wn]], "c": [[1.0, 0.0], [0.0, 1.0]], "d": [[0.0], [0.0]]}
+    pred = Prediction(name="ss", output="p", input="roll", state_space=ss, row=0, column=0, delay_s=tau)
+    assert np.allclose(pred.response(W), second_order(wn=wn, zeta=zeta, tau=tau), rtol=1e-9, atol=1e-12)
+    rate = Prediction(name="ss", output="p", input="roll", state_space=ss, row=1, column=0)   # x2 = x1': s H
+    assert np.allclose(rate.response(W), 1j * W * second_order(wn=wn, zeta=zeta, tau=0.0), rtol=1e-9)
+    resp = _resp(second_order(zeta=zeta, wn=wn, tau=tau), seed=7, mag_noise=0.3, phase_noise_deg=2.0)
+    good = model_pair(resp, output_units="deg/s", prediction=pred)
+    bad = model_pair(resp, output_units="deg/s", prediction=Prediction(
+        name="ss", output="p", input="roll", state_space=ss, row=0, column=0, delay_s=2 * tau))
+    assert [c.ok for c in good.limits if c.name == "prediction"] == [True]
+    assert [c.ok for c in bad.limits if c.name == "prediction"] == [False]
+
+
+@pytest.mark.parametrize("table, message", [
+    ('state_space = { a = [[0.0, 1.0]], b = [[1.0]], c = [[1.0]], d = [[0.0]] }',
+     "predictions.x.state_space: a is 1 x 2, must be 1 x 1"),
+    ('gain = 2.0\ndenominator = "[zeta, 3.0]"', "predictions.x.denominator: a prediction gives every value"),
+    ('denominator = "[0.5, 3.0]"', "predictions.x.gain: must be a finite, non-zero number"),
+    ('gain = 1.0\nstate_space = { a = [[-1.0]], b = [[1.0]], c = [[1.0]], d = [[0.0]] }',
+     "give either state_space or gain"),
+])
+def test_a_bad_prediction_is_refused_naming_its_key(tmp_path, table, message):
+    from livesweep.config import read_channel_map
+    from livesweep.errors import ConfigError
+
+    m = tmp_path / "m.toml"
+    m.write_text('[signals.p]\ntopic = "/a"\nfield = "p"\n\n[signals.roll]\ntopic = "/a"\nfield = "r"\n\n'
+                 f'[predictions.x]\noutput = "p"\ninput = "roll"\n{table}\n')
+    with pytest.raises(ConfigError) as e:
+        read_channel_map(m)
+    assert str(m) in str(e.value) and message in str(e.value)
+    assert "\n" not in str(e.value)

@@ -24,7 +24,8 @@ import numpy as np
 from livesweep.errors import ConfigError
 from livesweep.ident.accuracy import MAX_COST
 from livesweep.ident.transfer_function_structure import Structure, parse_structure
-from livesweep.settings_schema import Check, names, number, setting, string
+from livesweep import limits
+from livesweep.settings_schema import Check, integer, names, number, setting, string
 
 __all__ = ["EnvelopeLimits", "Prediction", "ModelSettings", "NO_LIMITS", "NO_MODEL_SETTINGS", "structure_response"]
 
@@ -117,9 +118,38 @@ def structure_response(gain: float, numerator: Structure, denominator: Structure
         return gain * product(numerator) / product(denominator) * np.exp(-s * float(delay_s))
 
 
+def _state_space_check() -> Check:
+    def matrix(name, value):
+        if not (isinstance(value, list) and value and all(isinstance(r, list) and r for r in value)):
+            raise ValueError(f"{name}: must be an array of rows (arrays of numbers)")
+        if len({len(r) for r in value}) != 1:
+            raise ValueError(f"{name}: rows of different lengths")
+        if len(value) > limits.MAX_MODEL_DIMENSION or len(value[0]) > limits.MAX_MODEL_DIMENSION:
+            raise ValueError(f"{name}: larger than {limits.MAX_MODEL_DIMENSION} x {limits.MAX_MODEL_DIMENSION}")
+        out = []
+        for r in value:
+            out.append(tuple(number().convert(v) for v in r))
+        return tuple(out)
+
+    def convert(value):
+        if not isinstance(value, dict) or set(value) != {"a", "b", "c", "d"}:
+            raise ValueError("must be a table of the matrices a, b, c, d (arrays of rows)")
+        m = {k: matrix(k, value[k]) for k in ("a", "b", "c", "d")}
+        n, ni, no = len(m["a"]), len(m["b"][0]), len(m["c"])
+        shapes = {"a": (n, n), "b": (n, ni), "c": (no, n), "d": (no, ni)}
+        for k, (r, c) in shapes.items():
+            if (len(m[k]), len(m[k][0])) != (r, c):
+                raise ValueError(f"{k} is {len(m[k])} x {len(m[k][0])}, must be {r} x {c} (a is n x n, b n x inputs, "
+                                 "c outputs x n, d outputs x inputs)")
+        return m
+
+    return Check(convert, "table of matrices a, b, c, d")
+
+
 @dataclass(frozen=True)
 class Prediction:
-    """``[predictions.NAME]``: the transfer function predicted for one pair, every value given.
+    """``[predictions.NAME]``: the response predicted for one pair, every value given: a transfer
+    function in the factored shorthand, or a state-space model.
 
     Attributes
     ----------
@@ -127,11 +157,17 @@ class Prediction:
         The table's name.
     output, input : str
         The pair (signals of the map or case).
-    gain : float
-        K of the factored form (output units per input unit times s^(relative degree)).
+    gain : float or None
+        K of the factored form (output units per input unit times s^(relative degree)); None with
+        ``state_space``.
     numerator, denominator : str
         Factors in the shorthand of ``[transfer_functions]`` with numbers, e.g. ``"[0.7, 25]"``
         for ``s^2 + 35 s + 625``, ``"(1/0.1)"`` for ``s + 10``.
+    state_space : dict or None
+        ``{"a", "b", "c", "d"}``: matrices (tuples of rows) of ``x' = A x + B u``, ``y = C x + D u``;
+        the pair is output ``row`` over input ``column``.
+    row, column : int
+        Which output and input of ``state_space`` the pair is (0-based).
     delay_s : float
         Equivalent delay [s].
     """
@@ -139,15 +175,31 @@ class Prediction:
     name: str = setting(key=False)
     output: str = setting(check=string(nonempty=True), doc="the pair's output signal")
     input: str = setting(check=string(nonempty=True), doc="the pair's input signal")
-    gain: float = setting(check=number(), doc="K of the factored form (output per input units × s^(relative "
-                                              "degree))")
+    gain: float | None = setting(None, number(), "K of the factored form (output per input units × s^(relative "
+                                 "degree)); required unless `state_space` is given", default_text="none")
     numerator: str = setting("", string(), "numerator factors with their values (the shorthand of "
                              "[transfer_functions])", default_text='"" (none)')
     denominator: str = setting("", string(), "denominator factors with their values", default_text='"" (none)')
+    state_space: dict | None = setting(None, _state_space_check(), "instead of the factors: the matrices `a`, `b`, "
+                                       "`c`, `d` (arrays of rows) of x′ = A x + B u, y = C x + D u",
+                                       default_text="none")
+    row: int = setting(0, integer(0, limits.MAX_MODEL_DIMENSION - 1), "the output of `state_space` the pair is "
+                       "(0-based)")
+    column: int = setting(0, integer(0, limits.MAX_MODEL_DIMENSION - 1), "the input of `state_space` the pair is "
+                          "(0-based)")
     delay_s: float = setting(0.0, number(0.0), "equivalent delay", units="s")
 
-    def structures(self, where: str = "") -> tuple[Structure, Structure]:
-        """The parsed numerator and denominator; ConfigError naming ``where`` when a value is missing."""
+    def structures(self, where: str = "") -> tuple[Structure, Structure] | None:
+        """The parsed numerator and denominator (None for a state-space prediction); ConfigError
+        naming ``where`` when a value is missing or the two forms are mixed."""
+        if self.state_space is not None:
+            if self.gain is not None or self.numerator or self.denominator:
+                raise ConfigError(f"{where}: give either state_space or gain with numerator and denominator, not both")
+            ss = self.state_space
+            if self.row >= len(ss["c"]) or self.column >= len(ss["b"][0]):
+                raise ConfigError(f"{where}: row {self.row}, column {self.column} is outside the {len(ss['c'])} "
+                                  f"outputs x {len(ss['b'][0])} inputs of state_space")
+            return None
         out = []
         for key in ("numerator", "denominator"):
             try:
@@ -159,19 +211,29 @@ class Prediction:
                 raise ConfigError(f"{where}.{key}: a prediction gives every value; {free[0]!r} is a name, got "
                                   f"{getattr(self, key)!r}")
             out.append(st)
-        if not math.isfinite(self.gain) or self.gain == 0:
-            raise ConfigError(f"{where}.gain: must be a finite, non-zero number, got {self.gain!r}")
+        if self.gain is None or not math.isfinite(self.gain) or self.gain == 0:
+            raise ConfigError(f"{where}.gain: must be a finite, non-zero number (or give state_space), got {self.gain!r}")
         return out[0], out[1]
 
     def response(self, omega) -> np.ndarray:
         """The predicted response at ``omega`` [rad/s] (complex)."""
-        num, den = self.structures(f"predictions.{self.name}")
-        return structure_response(self.gain, num, den, self.delay_s, omega)
+        st = self.structures(f"predictions.{self.name}")
+        w = np.asarray(omega, float)
+        if st is not None:
+            return structure_response(self.gain, st[0], st[1], self.delay_s, w)
+        A, B, C, D = (np.asarray(self.state_space[k], float) for k in ("a", "b", "c", "d"))
+        eye = np.eye(A.shape[0])
+        b, c = B[:, self.column], C[self.row]
+        H = np.array([c @ np.linalg.solve(1j * x * eye - A, b) for x in w.ravel()], complex).reshape(w.shape)
+        return (H + D[self.row, self.column]) * np.exp(-1j * w * self.delay_s)
 
     def to_dict(self) -> dict:
         """The ``[predictions.NAME]`` table."""
-        return {"output": self.output, "input": self.input, "gain": self.gain, "numerator": self.numerator,
-                "denominator": self.denominator, "delay_s": self.delay_s}
+        d = {"output": self.output, "input": self.input, "delay_s": self.delay_s}
+        if self.state_space is not None:
+            return {**d, "state_space": {k: [list(r) for r in v] for k, v in self.state_space.items()},
+                    "row": self.row, "column": self.column}
+        return {**d, "gain": self.gain, "numerator": self.numerator, "denominator": self.denominator}
 
 
 @dataclass(frozen=True)
