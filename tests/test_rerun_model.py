@@ -283,3 +283,14 @@ def test_records_missing_parts_draw_what_they_have_and_a_later_model_clears_the_
                                                                                               4_000_000_000]
     assert [t for t, _ in _rows(chunks, MODEL_TREND_PLOT_PATH + "/q_de/gain/points", "Points2D:positions")] == [
         1_000_000_000]
+
+
+def test_the_trend_table_has_a_column_per_condition():
+    from livesweep.monitor.rerun_model import trend_markdown
+
+    rows = [{"test_point": k, "start_s": 10.0 * k, "verdict": "GO", "conditions": {"airspeed": v},
+             "parameters": {"gain": [2.0 + k, 0.1]}, "figures": {}, "cost": 5.0} for k, v in ((1, 30.0), (2, 41.5))]
+    text = trend_markdown({"trend": [{"pair": "p/roll", "rows": rows}], "pairs": []})
+    header = next(line for line in text.splitlines() if line.startswith("| TP"))
+    assert [c.strip() for c in header.strip("|").split("|")][:5] == ["TP", "start", "verdict", "airspeed", "gain"]
+    assert "| 41.5 |" in text and "| 4 ± 0.1 |" in text

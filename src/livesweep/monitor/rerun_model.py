@@ -175,14 +175,17 @@ def _units(record: dict) -> dict:
 
 def trend_markdown(record: dict) -> str:
     """The trend of a ``/livesweep/model`` record as markdown: per pair one row per test point
-    (value ± bound of each parameter and figure that has a value, J), then the trend notes."""
+    (the map's conditions averaged over it, value ± bound of each parameter and figure that has a
+    value, J), then the trend notes."""
     units, out = _units(record), []
     trend = [t for t in _dicts(record.get("trend")) if _dicts(t.get("rows"))]
     for t in trend:
         rows, name = _dicts(t.get("rows")), t.get("pair") or "?"
         cols, u = _have(rows), units.get(name, {})
-        head = ["TP", "start", "verdict"] + [f"{k} [{u[k]}]" if u.get(k) else k for _, k in cols] + ["J"]
+        conds = list(dict.fromkeys(k for r in rows if isinstance(r.get("conditions"), dict) for k in r["conditions"]))
+        head = ["TP", "start", "verdict"] + conds + [f"{k} [{u[k]}]" if u.get(k) else k for _, k in cols] + ["J"]
         body = [[r.get("test_point", "?"), time_text(r.get("start_s")), r.get("verdict") or "?"]
+                + [value_text((r.get("conditions") or {}).get(c)) for c in conds]
                 + [value_text(*_values(r, kind).get(k, (None, None))) for kind, k in cols]
                 + [value_text(r.get("cost"))] for r in rows]
         out += [f"#### {name}", ""] + md_table(head, body) + [""]
