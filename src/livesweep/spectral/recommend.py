@@ -36,8 +36,8 @@ from types import MappingProxyType
 import numpy as np
 
 from livesweep.spectral.spectra import MIN_PERIODS_PER_WINDOW
-from livesweep.spectral.verdict import (_MIN_ISLAND_DECADES, LOW_FREQUENCY_PERIODS, MARGINAL_SIGMAS, TestPointJudgement,
-                                        _gaps, _swept_bands, coherence_sigma)
+from livesweep.spectral.verdict import (LOW_FREQUENCY_PERIODS, MARGINAL_SIGMAS, MIN_ISLAND_DECADES, TestPointJudgement,
+                                        band_gaps, coherence_sigma, swept_stretches)
 
 __all__ = ["MissingBand", "Recommendation", "recommend_next", "RECORD_PERIODS", "MAX_AMPLITUDE_FACTOR",
            "NUMBER_OF_SWEEPS", "TRIM_S", "FADE_CYCLES", "DWELL_CYCLES", "INPUT_HOLE_DB", "GO_MARGIN_SD"]
@@ -67,7 +67,7 @@ GO_MARGIN_SD = 2.0
 INPUT_HOLE_DB = 20.0
 
 _HZ = 1.0 / (2.0 * math.pi)
-_BRIDGE = 10 ** _MIN_ISLAND_DECADES          # the judge's own granularity: holes narrower are bridged
+_BRIDGE = 10 ** MIN_ISLAND_DECADES          # the judge's own granularity: holes narrower are bridged
 
 
 @dataclass(frozen=True)
@@ -172,8 +172,8 @@ def _swept(j: TestPointJudgement, input_samples) -> tuple:
     if j.injection is not None or input_samples is None:
         return (j.swept_rad_s,) if j.swept_rad_s else ()    # an injection's own schedule is exact
     x, rate = input_samples                                 # as the judge tells it, islands as its gaps do
-    got = [b for b in (_swept_bands(np.asarray(x, float), float(rate), (lo, hi)) or ())
-           if math.log10(b[1] / b[0]) >= _MIN_ISLAND_DECADES]
+    got = [b for b in (swept_stretches(np.asarray(x, float), float(rate), (lo, hi)) or ())
+           if math.log10(b[1] / b[0]) >= MIN_ISLAND_DECADES]
     if got and got[0][0] <= lo * _BRIDGE:                   # a half-period's midpoint is inside the band
         got[0] = (lo, got[0][1])
     if got and got[-1][1] >= hi / _BRIDGE:
@@ -202,7 +202,7 @@ def _dark(input_spectrum, swept) -> tuple:
     low = inside & (level < np.median(level[inside]) - INPUT_HOLE_DB)
     edges = np.flatnonzero(np.diff(np.concatenate([[0], low.astype(int), [0]])))
     runs = [(float(grid[i]), float(grid[k - 1])) for i, k in zip(edges[::2], edges[1::2])]
-    return tuple((a, b) for a, b in runs if b > a and math.log10(b / a) >= _MIN_ISLAND_DECADES)
+    return tuple((a, b) for a, b in runs if b > a and math.log10(b / a) >= MIN_ISLAND_DECADES)
 
 
 def _minus(swept, dark) -> tuple:
@@ -342,7 +342,7 @@ def recommend_next(judgement: TestPointJudgement, *, input_spectrum=None, input_
     for p in j.pairs or [None]:
         bands = [] if p is None else [(max(a, c), min(b, d))      # adequate only where the input was swept
                                       for a, b in p.bands_rad_s for c, d in swept if min(b, d) > max(a, c)]
-        for a, b in _gaps(bands, lo, hi):
+        for a, b in band_gaps(bands, lo, hi):
             missing += _classify(f"{p.output}/{p.input}" if p else j.swept_input, p.response if p else None,
                                  a, b, swept, r, crit, dark)
     lines = [f"{j.label} for {j.swept_input}: {len(missing)} band(s) missing." if missing else

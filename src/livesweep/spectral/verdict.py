@@ -68,7 +68,7 @@ from livesweep.spectral.windows import longest_window_samples
 
 __all__ = ["PairJudgement", "TestPointJudgement", "judge_test_point", "REQUIRED_FRACTION", "LOW_FREQUENCY_PERIODS",
            "NYQUIST_FRACTION", "MARGINAL_SIGMAS", "coherence_sigma", "shows_up_to_rad_s", "DataLoss", "frames_missing",
-           "LOSS_REASON_FRACTION", "LOSS_LINK_FRACTION"]
+           "LOSS_REASON_FRACTION", "LOSS_LINK_FRACTION", "MIN_ISLAND_DECADES", "band_gaps", "swept_stretches"]
 
 #: Periods of its lowest frequency a sweep needs to resolve it (docs/method.md §2.5, T_rec >= 4-5 T_max).
 LOW_FREQUENCY_PERIODS = 4.0
@@ -76,7 +76,7 @@ LOW_FREQUENCY_PERIODS = 4.0
 #: zero-padded grid and the resampler's interpolation both distort the last fifth).
 NYQUIST_FRACTION = 0.8
 #: Adequate stretches narrower than this [decades] do not split what is missing into pieces.
-_MIN_ISLAND_DECADES = 0.1
+MIN_ISLAND_DECADES = 0.1
 #: A band swept so far narrower than this [decades] is not judged yet.
 _MIN_SWEPT_DECADES = 0.05
 #: The adequate fraction's bracket: the coherence at -/+ this many of its predicted standard
@@ -409,11 +409,11 @@ def _adequate_bands(omega: np.ndarray, ok: np.ndarray) -> tuple:
                  for a, b in zip(edges[::2], edges[1::2]))
 
 
-def _gaps(bands, lo: float, hi: float) -> list[tuple[float, float]]:
-    """The parts of [lo, hi] no band covers (bands narrower than ``_MIN_ISLAND_DECADES`` ignored, so a
+def band_gaps(bands, lo: float, hi: float) -> list[tuple[float, float]]:
+    """The parts of [lo, hi] no band covers (bands narrower than ``MIN_ISLAND_DECADES`` ignored, so a
     coherent island does not split one missing stretch into several lines)."""
     out, x = [], lo
-    bands = [(a, b) for a, b in bands if math.log10(b / a) >= _MIN_ISLAND_DECADES]
+    bands = [(a, b) for a, b in bands if math.log10(b / a) >= MIN_ISLAND_DECADES]
     for a, b in sorted(bands):
         if a > x * (1 + 1e-9):
             out.append((x, min(a, hi)))
@@ -438,23 +438,23 @@ def _describe_gap(pair: str, a: float, b: float, lo: float, hi: float, resolvabl
     return f"{pair} needs {band}: coherence below {criteria.min_coherence:g} there (more amplitude, or repeat the sweep)"
 
 
-def _swept_bands(x: np.ndarray, sample_rate_hz: float, band_rad_s) -> tuple | None:
+def swept_stretches(x: np.ndarray, sample_rate_hz: float, band_rad_s) -> tuple | None:
     """Stretches [rad/s] of ``band_rad_s`` the oscillation of ``x`` passed through: the
     instantaneous frequencies of its half-periods (:func:`half_period_frequencies`) on a log grid,
-    holes narrower than ``_MIN_ISLAND_DECADES`` bridged (a sweep spends one half-period per cell at
+    holes narrower than ``MIN_ISLAND_DECADES`` bridged (a sweep spends one half-period per cell at
     its lowest frequencies); None when the record is too short to tell."""
     lo, hi = band_rad_s
     if x.size < 16:
         return None
     _, w = half_period_frequencies(np.arange(x.size) / sample_rate_hz, x)
-    w = w[(w >= lo * 10 ** -_MIN_ISLAND_DECADES) & (w <= hi * 10 ** _MIN_ISLAND_DECADES)]
+    w = w[(w >= lo * 10 ** -MIN_ISLAND_DECADES) & (w <= hi * 10 ** MIN_ISLAND_DECADES)]
     if w.size < 2:
         return ()
     grid = np.geomspace(lo, hi, 200)                        # judged in decades, as the pairs are
     hit = np.zeros(grid.size, bool)
     k = np.clip(np.searchsorted(grid, w), 0, grid.size - 1)
     hit[k] = True
-    cells = int(math.ceil(_MIN_ISLAND_DECADES / math.log10(grid[1] / grid[0])))
+    cells = int(math.ceil(MIN_ISLAND_DECADES / math.log10(grid[1] / grid[0])))
     filled = hit.copy()
     idx = np.flatnonzero(hit)
     for a, b in zip(idx[:-1], idx[1:]):
@@ -465,12 +465,12 @@ def _swept_bands(x: np.ndarray, sample_rate_hz: float, band_rad_s) -> tuple | No
 
 def _contiguous(bands) -> tuple[float, float] | None:
     """The covered stretch from the lowest covered frequency up to the first hole wider than
-    ``_MIN_ISLAND_DECADES`` (the sweep's progress: islands above a hole do not count)."""
+    ``MIN_ISLAND_DECADES`` (the sweep's progress: islands above a hole do not count)."""
     out = None
     for a, b in sorted(bands):
         if out is None:
             out = (a, b)
-        elif a <= out[1] * 10 ** _MIN_ISLAND_DECADES:
+        elif a <= out[1] * 10 ** MIN_ISLAND_DECADES:
             out = (out[0], max(out[1], b))
         else:
             break
@@ -577,7 +577,7 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
         swept_bands = () if sb is None else ((sb[0], sb[1]),)
     else:
         row = names.index(ref if ref else swept_input) if (ref or swept_input) in names else None
-        swept_bands = None if row is None else _swept_bands(values[row], sample_rate_hz, (lo, hi))
+        swept_bands = None if row is None else swept_stretches(values[row], sample_rate_hz, (lo, hi))
     swept = None if not swept_bands else _contiguous(swept_bands)
     if swept is not None:
         swept = (max(swept[0], lo), min(swept[1], hi))
@@ -623,7 +623,7 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
                        f"random error; {kind} coherence)")
         if not ok:
             missing += [_describe_gap(pair, ga, gb, lo, j_hi, resolvable, duration, criteria)
-                        for ga, gb in _gaps(p.bands_rad_s, lo, j_hi)]
+                        for ga, gb in band_gaps(p.bands_rad_s, lo, j_hi)]
     failing = [p.output for p in pairs if p.adequate_fraction < required_fraction]
     for sig in dict.fromkeys([swept_input, *failing] if failing else []):   # each signal once
         rate = (source_rates_hz or {}).get(sig)
@@ -647,7 +647,7 @@ def judge_test_point(values: np.ndarray, names, sample_rate_hz: float, swept_inp
         reasons.append(f"{swept_input}: {_percent(excited, required_fraction)} of {band_text} {word} "
                        f"(need {_percent(required_fraction)}: {_pts(excited, required_fraction)}): {reached}")
         if final and excited < required_fraction:
-            gaps = ", ".join(f"{a:.3g}-{b:.3g}" for a, b in _gaps(swept_bands, lo, j_hi))
+            gaps = ", ".join(f"{a:.3g}-{b:.3g}" for a, b in band_gaps(swept_bands, lo, j_hi))
             missing.append(f"{swept_input} needs a sweep over {gaps} rad/s: {reached}")
     if duration < min_duration_s:
         reasons.insert(0, f"test point {duration:.1f} s long, shorter than {min_duration_s:g} s")
