@@ -71,3 +71,40 @@ def cruise_report_dir(cruise_run, tmp_path_factory):
     text = "\n".join([f"[stage] {m}" for m in [*said, "writing the report"]] + summary_lines(ident)
                      + [f"wrote {path} and {out / 'report.html'}"])
     return out, json.loads(path.read_text()), text
+
+
+def _shared_data() -> Path:
+    data = ROOT.parent / "shared" / "data"
+    return data if data.is_dir() else Path("/work/shared/data")
+
+
+#: The shared ArduCopter SITL SystemID DataFlash logs (a roll-rate and a pitch-rate chirp).
+SITL_LOGS = {"roll": _shared_data() / "ardupilot_sitl_systemid" / "sid_axis7_rate_roll.bin",
+             "pitch": _shared_data() / "ardupilot_sitl_systemid" / "sid_axis8_rate_pitch.bin"}
+
+
+@pytest.fixture(scope="session")
+def sitl_mcaps(tmp_path_factory):
+    """The SITL SystemID logs converted once (``livesweep convert``): ``{"roll": mcap, "pitch": mcap}``;
+    skips when the shared data is absent."""
+    from livesweep.convert import convert
+
+    missing = [str(p) for p in SITL_LOGS.values() if not p.is_file()]
+    if missing:
+        pytest.skip(f"shared ArduPilot SITL SystemID logs not found: {', '.join(missing)}")
+    out = {}
+    for axis, src in SITL_LOGS.items():
+        out[axis] = tmp_path_factory.mktemp("sitl") / f"{axis}.mcap"
+        convert(src, out[axis])
+    return out
+
+
+@pytest.fixture(scope="session")
+def sitl_replays(sitl_mcaps, tmp_path_factory):
+    """Each converted SITL log replayed through the monitor with the ``ardupilot-sysid-dataflash``
+    preset and recorded: ``{axis: ReplayResult}`` (``.recording`` holds its /livesweep channels)."""
+    import livesweep
+
+    tmp = tmp_path_factory.mktemp("sitl_replay")
+    return {axis: livesweep.replay(path, map="ardupilot-sysid-dataflash", record=tmp / f"{axis}.rec.mcap")
+            for axis, path in sitl_mcaps.items()}

@@ -23,28 +23,19 @@ from livesweep.settings import RecordSpec
 from livesweep.stages.live_models import (MODEL_TOPIC, compare_pair, live_models_section, overlap_fraction,
                                           parameter_map, read_live_models)
 
-SOURCE = Path("/work/shared/data/ardupilot_sitl_systemid/sid_axis7_rate_roll.bin")
 ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def flight(tmp_path_factory):
+def flight(sitl_mcaps, sitl_replays, tmp_path_factory):
     """The converted log, the replay's recording, its first model and that test point's judged band."""
-    if not SOURCE.is_file():
-        pytest.skip(f"{SOURCE} is not on this machine")
-    import livesweep
-    from livesweep.convert import convert
-
-    tmp = tmp_path_factory.mktemp("live_models")
-    log = tmp / "sid7.mcap"
-    convert(SOURCE, log)
-    rec = tmp / "rec.mcap"
-    r = livesweep.replay(log, map="ardupilot-sysid-dataflash", record=rec)
+    r = sitl_replays["roll"]
     assert r.models, "the replay recorded no model"
     model = r.models[0]
     tp = model["test_point"]
     point = next(t for t in r.test_points if t.get("judged_band_rad_s") and t["start_s"] == tp["start_s"])
-    return types.SimpleNamespace(tmp=tmp, log=log, rec=rec, model=model, band=point["judged_band_rad_s"])
+    return types.SimpleNamespace(tmp=tmp_path_factory.mktemp("live_models"), log=sitl_mcaps["roll"], rec=r.recording,
+                                 model=model, band=point["judged_band_rad_s"])
 
 
 def _case(flight, path: Path, *, log=None, tf: bool = True) -> Path:

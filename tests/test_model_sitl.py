@@ -23,11 +23,8 @@ import pytest
 
 pytestmark = pytest.mark.slow      # four replays of 400 Hz logs and two identifications
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-if not DATA.is_dir():
-    DATA = Path("/work/shared/data")
-LOGS = {"roll": DATA / "ardupilot_sitl_systemid" / "sid_axis7_rate_roll.bin",
-        "pitch": DATA / "ardupilot_sitl_systemid" / "sid_axis8_rate_pitch.bin"}
+from conftest import SITL_LOGS as LOGS
+
 MAP = Path(__file__).resolve().parents[1] / "src" / "livesweep" / "data" / "maps" / "ardupilot-sysid-dataflash.toml"
 FIELDS = {"roll": "RDes", "pitch": "PDes", "p": "R", "q": "P"}
 
@@ -47,24 +44,13 @@ def _autopilot_span(log: Path, axis: int) -> tuple[float, float]:
 
 
 @pytest.fixture(scope="module")
-def logs(tmp_path_factory):
-    from livesweep.convert import convert
-
-    if not all(p.is_file() for p in LOGS.values()):
-        pytest.skip("shared ArduPilot SITL SystemID logs not present")
-    out = {}
-    for axis, src in LOGS.items():
-        dst = tmp_path_factory.mktemp("sitl") / f"{axis}.mcap"
-        convert(src, dst)
-        out[axis] = dst
-    return out
+def logs(sitl_mcaps):
+    return sitl_mcaps
 
 
 @pytest.fixture(scope="module")
-def live(logs):
-    import livesweep
-
-    return {axis: livesweep.replay(path, map="ardupilot-sysid-dataflash") for axis, path in logs.items()}
+def live(sitl_replays):
+    return sitl_replays
 
 
 def _case(path: Path, log: Path, swept: str, out: str, tp: dict, pair: dict) -> Path:

@@ -8,7 +8,6 @@ import math
 from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
 import pytest
 import rerun as rr
 import rerun.blueprint as rrb
@@ -19,9 +18,9 @@ from livesweep.monitor.blueprint import (
     model_pair_path, model_trend_plot_path,
 )
 from livesweep.monitor.rerun_model import ModelPanel, model_markdown, trend_markdown, trend_quantities, value_text
+from test_rerun_view import _rows
 
 ROOT = Path(__file__).resolve().parents[1]
-SOURCE = Path("/work/shared/data/ardupilot_sitl_systemid/sid_axis7_rate_roll.bin")
 MAP = ROOT / "src" / "livesweep" / "data" / "maps" / "ardupilot-sysid-dataflash.toml"
 #: A limit the log's roll-rate model breaks (its delay is about 0.010 s) and a prediction of it.
 EXTRA = """
@@ -40,21 +39,6 @@ delay_s = 0.012
 # ------------------------------------------------------------------------------------ helpers
 
 
-def _rows(chunks, entity: str, column: str) -> list:
-    """(time_ns or None, value) of every row of ``column`` at ``entity``, in time order."""
-    out = []
-    for c in chunks:
-        if c.entity_path != "/" + entity:
-            continue
-        rb = c.to_record_batch()
-        if column not in rb.schema.names:
-            continue
-        times = (rb.column("flight_time").cast(pa.int64()).to_pylist() if "flight_time" in rb.schema.names
-                 else [None] * rb.num_rows)
-        out += list(zip(times, rb.column(column).to_pylist()))
-    return sorted(out, key=lambda r: -1 if r[0] is None else r[0])
-
-
 def _last(chunks, entity: str, column: str):
     rows = _rows(chunks, entity, column)
     assert rows, f"nothing in {column} at {entity}"
@@ -62,16 +46,12 @@ def _last(chunks, entity: str, column: str):
 
 
 @pytest.fixture(scope="module")
-def replayed(tmp_path_factory):
+def replayed(sitl_mcaps, tmp_path_factory):
     """One replay of the SITL roll-rate sweep, with a broken delay limit and a prediction, into an .rrd."""
-    if not SOURCE.is_file():
-        pytest.skip(f"{SOURCE} is not on this machine")
     import livesweep
-    from livesweep.convert import convert
 
     tmp = tmp_path_factory.mktemp("rerun_model")
-    log = tmp / "sid7.mcap"
-    convert(SOURCE, log)
+    log = sitl_mcaps["roll"]
     map_path = tmp / "map.toml"
     map_path.write_text(MAP.read_text() + EXTRA)
     r = livesweep.replay(log, map=str(map_path), rerun=tmp / "model.rrd")
