@@ -37,7 +37,7 @@ from livesweep.errors import ConfigError
 from livesweep.ident.accuracy import MAX_COST, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT, NOT_DETERMINED_PCT
 from livesweep.ident.cost import fit_points, pair_cost
 from livesweep.ident.envelope import NO_LIMITS, EnvelopeLimits, Prediction
-from livesweep.ident.handling import crossover_and_margins
+from livesweep.ident.handling import crossover_and_margins, handling_qualities
 from livesweep.ident.transfer_function import TransferFunctionModel, fit_transfer_function
 from livesweep.spectral.criteria import DEFAULT_CRITERIA, Criteria
 
@@ -314,8 +314,6 @@ _LOOP = (("crossover", 0, "rad/s"), ("phase margin", 1, "deg"), ("gain margin", 
 
 def _figures(fit, omega, units: str, broken_loop: bool) -> tuple:
     """Handling-qualities (and, for a broken loop, loop) figures of the fitted model on the data's grid."""
-    from livesweep.stages.parametric import handling_qualities
-
     lo, hi = fit.band_rad_s
     out = []
 

@@ -13,14 +13,16 @@ import numpy as np
 from livesweep.config import Case, require_table
 from livesweep.errors import ConfigError, check_band, quote
 from livesweep.ident.cost import fit_points
+from livesweep.ident.handling import ATTITUDE_UNITS, RATE_UNITS, handling_qualities, response_kind
 from livesweep.ident.transfer_function import (STRUCTURE_PREFIXES, TransferFunctionModel, fit_transfer_function,
                                                parse_structure)
-from livesweep.spectral.criteria import DEFAULT_CRITERIA
 from livesweep.spectral.response import FrequencyResponseSet
 
 __all__ = ["TransferFunctionSpec", "TransferFunctionStage", "transfer_function_specs", "run_transfer_function_stage",
            "StateSpaceStage", "run_state_space_stage", "VerificationStage", "VerificationRunner",
-           "run_verification_stage"]
+           "run_verification_stage", "specs_of_tables",
+           # the handling-qualities reading lives in livesweep.ident.handling; importable from here too
+           "handling_qualities", "response_kind", "RATE_UNITS", "ATTITUDE_UNITS"]
 
 _TF_KEYS = {"output", "input", "numerator", "denominator", "delay", "band_rad_s"}
 
@@ -33,60 +35,6 @@ class TransferFunctionStage:
     pairs: dict          # name -> PairData
     notes: tuple
     handling: dict = None   # name -> {"measured": {...}, "fitted": {...}}
-
-
-#: Output units of an angular rate (its attitude response is the rate integrated) and of an attitude.
-RATE_UNITS = ("deg/s", "rad/s")
-ATTITUDE_UNITS = ("deg", "rad")
-
-
-def response_kind(output_units: str) -> str | None:
-    """``"rate"`` for an angular-rate output, ``"attitude"`` for an angle, None otherwise (the
-    handling-qualities criteria are defined on attitude responses only)."""
-    u = (output_units or "").strip()
-    return "rate" if u in RATE_UNITS else "attitude" if u in ATTITUDE_UNITS else None
-
-
-def handling_qualities(omega, H, *, coherence=None, output_units: str = "deg/s",
-                       min_coherence: float = DEFAULT_CRITERIA.min_coherence) -> dict | None:
-    """Bandwidth, phase delay and omega_180 of an attitude response, for the report.
-
-    A rate response (the usual sweep pair, e.g. p/da, output in deg/s or rad/s) is integrated to
-    the attitude response the criteria are defined on; an attitude response (output in deg or
-    rad) is used as it is; any other output (an acceleration, a sideslip) has no such criteria
-    and gives None. A negative control sense (the attitude response starting near +/-180 deg
-    at the lowest coherent frequencies, i.e. the rate response near 180 deg) is flipped first.
-    Values are None where the crossing is not in the data; with ``coherence``, only points with
-    gamma^2 >= ``min_coherence`` (the case's criteria) are read.
-    """
-    from livesweep.ident.handling import bandwidth, phase_delay
-    from livesweep.spectral.response import FrequencyResponse
-
-    kind = response_kind(output_units)
-    if kind is None:
-        return None
-    H = np.asarray(H, complex)
-    w = np.asarray(omega, float)
-    coh = np.ones(H.shape) if coherence is None else np.asarray(coherence, float)
-    ok = np.isfinite(H) & (coh >= min_coherence)
-    if not ok.any():
-        ok = np.isfinite(H)
-    low = np.flatnonzero(ok)[: max(3, ok.sum() // 10)]
-    rate_like = H[low] if kind == "rate" else H[low] * 1j * w[low]      # sign from the rate response at low frequency
-    sign = -1.0 if np.median(np.cos(np.angle(rate_like))) < 0 else 1.0
-    resp = FrequencyResponse("y", "u", w, sign * H, coh, np.zeros(H.shape))
-    integrate = kind == "rate"
-    mc = min_coherence if coherence is not None else None
-    bw = bandwidth(resp, "rate", integrate=integrate, min_coherence=mc)
-    tau_p = phase_delay(resp, integrate=integrate, min_coherence=mc) if bw.omega_180 is not None else None
-
-    def num(x):
-        return None if x is None or not np.isfinite(x) else float(x)
-
-    return {"omega_180_rad_s": num(bw.omega_180), "bandwidth_gain_rad_s": num(bw.gain),
-            "bandwidth_phase_rad_s": num(bw.phase), "bandwidth_rad_s": num(bw.bandwidth),
-            "phase_delay_s": num(tau_p), "sign_flipped": sign < 0,
-            "response": "attitude (rate / s)" if integrate else "attitude"}
 
 
 def _tf_table(path, name: str, raw) -> dict:
