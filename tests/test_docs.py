@@ -81,7 +81,7 @@ def _case_file_tables() -> dict[str, set]:
     from livesweep.convert import table
     from livesweep.ident.state_space import _TABLE_KEYS
     from livesweep.stages import residual
-    from livesweep.stages.parametric import _TF_KEYS
+    from livesweep.tf_tables import _TF_KEYS
 
     return {
         "Top-level tables of a case file": set(config.CASE_KEYS),

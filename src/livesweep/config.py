@@ -35,9 +35,10 @@ from typing import Any
 from livesweep import limits
 from livesweep.errors import ConfigError, check_band, quote
 from livesweep.ident.envelope import NO_LIMITS, EnvelopeLimits, ModelSettings, Prediction
+from livesweep.tf_tables import specs_of_tables
 from livesweep.settings import (TEST_POINT_SOURCES, Case, ChannelMap, Criteria, RecordSpec, SignalSpec,
                                 SpectralSettings, TestPointSettings)
-from livesweep.settings_schema import read_table, table_keys
+from livesweep.settings_schema import read_table, require_table, table_keys
 
 __all__ = [
     "SignalSpec",
@@ -102,17 +103,6 @@ class _Ctx:
 def _type_name(value: Any) -> str:
     return {bool: "boolean", int: "integer", float: "float", str: "string",
             list: "array", dict: "table"}.get(type(value), type(value).__name__)
-
-
-def require_table(raw: Any, known, where: str) -> dict:
-    """``raw`` as a table whose keys are all in ``known``, for the model tables later stages parse
-    (``[transfer_functions.*]``, ``[residual]``); ConfigError naming ``where`` (file and table)."""
-    if not isinstance(raw, dict):
-        raise ConfigError(f"{where}: must be a table, got {raw!r}")
-    unknown = sorted(set(raw) - set(known))
-    if unknown:
-        raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
-    return raw
 
 
 def _check_keys(ctx: _Ctx, table: Mapping[str, Any], known: tuple[str, ...], where: str) -> None:
@@ -348,8 +338,6 @@ def _parse_criteria(ctx: _Ctx, raw: Any) -> Criteria:
 def _parse_models(ctx: _Ctx, data: Mapping[str, Any], signals: dict) -> ModelSettings:
     """``[transfer_functions.*]``, ``[predictions.*]`` and ``[limits]``: what each test point's model
     is fitted with and held to (every pair's signals in ``[signals]``)."""
-    from livesweep.stages.parametric import specs_of_tables
-
     raw_tf = data.get("transfer_functions") or {}
     specs = specs_of_tables(raw_tf, ctx.path) if raw_tf else ()
     limits = EnvelopeLimits(**read_table(data["limits"], EnvelopeLimits, "limits", ctx.path)) \

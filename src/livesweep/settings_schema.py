@@ -26,7 +26,7 @@ from typing import Any
 
 from livesweep.errors import ConfigError, quote
 
-__all__ = ["setting", "Check", "number", "integer", "string", "names", "numbers", "choices", "read_table",
+__all__ = ["require_table", "setting", "Check", "number", "integer", "string", "names", "numbers", "choices", "read_table",
            "table_keys", "markdown_table", "write_docs"]
 
 
@@ -297,3 +297,14 @@ def write_docs(text: str, tables: Mapping[str, type]) -> str:
         return m.group(1) + markdown_table(tables[m.group("name")]) + "\n" + m.group(4)
 
     return _BLOCK.sub(sub, text)
+
+
+def require_table(raw: Any, known, where: str) -> dict:
+    """``raw`` as a table whose keys are all in ``known``, for the model tables later stages parse
+    (``[transfer_functions.*]``, ``[residual]``); ConfigError naming ``where`` (file and table)."""
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{where}: must be a table, got {raw!r}")
+    unknown = sorted(set(raw) - set(known))
+    if unknown:
+        raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
+    return raw

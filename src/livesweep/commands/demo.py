@@ -56,7 +56,7 @@ def cmd_demo(args) -> int:
 
     from livesweep.config import load_channel_map
     from livesweep.ident.envelope import ModelSettings
-    from livesweep.stages.parametric import specs_of_tables
+    from livesweep.tf_tables import specs_of_tables
     from livesweep.locks import folder_lock
     from livesweep.monitor.pipeline import MonitorSettings
     from livesweep.monitor.session import monitor

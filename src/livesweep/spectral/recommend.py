@@ -17,8 +17,10 @@ and says which stretches of the judged band each required pair lacks, and why:
   then meets the threshold, half the stretch still under it. The sweep's amplitude is instead the
   smallest that makes each pair a clear GO by the judge's own rule: the coherence predicted at each
   frequency (bias removed, power scaled, bias put back), less :data:`GO_MARGIN_SD` of the judge's
-  bracket, adequate over ``required_fraction`` of the swept, resolved part (standing for the band
-  the recommended sweep covers). Capped at :data:`MAX_AMPLITUDE_FACTOR`; random error left after the
+  bracket, adequate over ``required_fraction`` of every resolved frequency up to where the sweep
+  got, as the judge counts them (the stretch a sweep's fade-in leaves weak is judged too, and
+  the next sweep leaves it weak again); the frequencies it never reached are taken to fare as
+  those did. Capped at :data:`MAX_AMPLITUDE_FACTOR`; random error left after the
   cap asks for more sweeps.
 
 Then the method's sweep (band, T_rec, number of sweeps, amplitude, trims, fades: §2.1-2.3) and, for an
@@ -244,7 +246,8 @@ def _go_power(p, swept, r: float, crit) -> float:
     if resp is None:
         return 1.0
     w, coh, eps = resp.omega, resp.coherence, resp.random_error
-    part = (w >= r) & _inside(w, swept)                     # swept and resolved: it stands for the band
+    reach = swept[-1][1] if swept else math.inf
+    part = (w >= r) & (w <= reach * (1 + 1e-9))             # resolved, up to where it got: it stands for the band
     m = part & np.isfinite(coh) & np.isfinite(eps) & (eps > 0)
     if np.count_nonzero(m) < 2:
         return 1.0
@@ -298,6 +301,10 @@ def _classify(pair, resp, a, b, swept, r, crit, dark) -> list[MissingBand]:
             why = ("no response: the test point was too short to analyse" if resp is None else
                    f"the record resolves only from {r:.3g} rad/s: {RECORD_PERIODS:g} periods of {x:.3g} rad/s "
                    f"need {RECORD_PERIODS * 2 * math.pi / x:.0f} s")
+        elif g is None:
+            factor = MAX_AMPLITUDE_FACTOR
+            why = "no usable response there (coherence nil or random error undefined): the input must rise " \
+                  "well above the noise"
         else:
             factor = math.sqrt(power)
             why = f"median coherence {g:.2f}: input power x{power:.2g} needed, amplitude x{factor:.2g}"
