@@ -199,13 +199,11 @@ def test_window_spectra_values_counts_what_the_spectral_stage_allocates():
     ({"numerator": [1, 2]}, ["transfer_functions.p_da.numerator", "[1, 2]"]),
 ])
 def test_transfer_function_table_numbers_and_flags_are_checked(tmp_path, raw, words):
-    from types import SimpleNamespace
-
-    from livesweep.stages.parametric import _tf_table
+    from livesweep.tf_tables import specs_of_tables
 
     table = {"output": "p", "input": "da", "denominator": "(1/T)", **raw}
     with pytest.raises(ConfigError) as e:
-        _tf_table(SimpleNamespace(path=tmp_path / "case.toml"), "p_da", table)
+        specs_of_tables({"p_da": table}, tmp_path / "case.toml")
     for w in words:
         assert w in str(e.value), (w, str(e.value))
 
