@@ -15,6 +15,7 @@ import os
 import sys
 
 from livesweep.cli_parser import EXAMPLES, build_parser
+from livesweep.commands.campaign import cmd_campaign
 from livesweep.commands.common import counts_text as _counts_text
 from livesweep.commands.demo import cmd_demo
 from livesweep.commands.identify import cmd_identify
@@ -28,7 +29,7 @@ from livesweep.errors import LivesweepError
 # livesweep.cli also offers the commands and the helpers scripts and tests use, from livesweep.commands
 __all__ = ["main", "build_parser", "EXAMPLES", "EXIT_USAGE", "EXIT_DATA_LOST", "cmd_sim", "cmd_stream", "cmd_monitor",
            "cmd_replay", "cmd_identify", "cmd_demo", "cmd_convert", "cmd_inspect", "cmd_new_case", "cmd_recover",
-           "cmd_maps", "_counts_text", "_ALIGNER_WORDS", "_monitor_settings", "_recorded_settings"]
+           "cmd_maps", "cmd_campaign", "_counts_text", "_ALIGNER_WORDS", "_monitor_settings", "_recorded_settings"]
 
 EXIT_USAGE = 2
 

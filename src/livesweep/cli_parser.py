@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 
 from livesweep import __version__
+from livesweep.commands.campaign import add_campaign_arguments
 from livesweep.commands.demo import cmd_demo
 from livesweep.commands.identify import cmd_identify
 from livesweep.commands.logs import cmd_convert, cmd_inspect, cmd_maps, cmd_new_case, cmd_recover
@@ -197,6 +198,14 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("batch", help="run many identifications in parallel (local cores or a Dask cluster), resumable")
     add_batch_arguments(b)
 
+    cp = sub.add_parser("campaign", help="a flight-test campaign database: add logs, list their test points",
+                        description="A campaign: every flight (log file, identified by the SHA-256 of its content) "
+                                    "and test point in one SQLite file. `campaign add DB FILES...` adds logs; "
+                                    "`campaign list DB` lists test points (--axis, --input, --verdict, --flight); "
+                                    "`campaign identify DB --map M --input IN --out DIR` identifies the selected test "
+                                    "points of one input across flights, concatenated.")
+    add_campaign_arguments(cp)
+
     d = sub.add_parser("demo", help="fly simulated XV-15 sweeps live into the monitor, record them, identify frequency responses")
     d.add_argument("--out", help="folder for the recording, the .rrd and the report (default: ./livesweep-demo)")
     d.add_argument("--speed", type=_positive_float, default=10.0, help="simulator pace, x real time (default 10)")
@@ -228,6 +237,9 @@ EXAMPLES = {
     "recover": ["livesweep recover flight.mcap", "livesweep recover flight.mcap --out fixed.mcap --force"],
     "stream": ["livesweep stream flight.tlog --mavlink udpout:127.0.0.1:14550"],
     "batch": ["livesweep batch cases/ --out out/batch --workers 4", "livesweep batch cases/*.toml --out out/batch --no-plots"],
+    "campaign": ["livesweep campaign add flights.db logs/*.bin logs/*.tlog",
+                 "livesweep campaign list flights.db --axis 7 --verdict GO",
+                 "livesweep campaign identify flights.db --map ardupilot-sysid-dataflash --input roll --out roll"],
     "demo": ["livesweep demo", "livesweep demo --out /tmp/demo --speed 20 --view"],
 }
 
