@@ -1,0 +1,121 @@
+"""``campaign identify``: the selected test points of one input, across flights, in one identification.
+
+The test points a query of the campaign selects (:meth:`Campaign.test_points`: one swept input,
+its verdict, flights, conditions) become one case with one ``[[identify]]`` record per test point
+(:func:`livesweep.campaign.concat.identify_test_points`): the method's multi-run concatenation.
+Each record is the test point with :data:`TRIM_PAD_S` of the flight before and after it (the
+records are joined end to end and windows span the joins, so each must start and end in trim).
+A flight that is not MCAP (a DataFlash ``.bin``, a ``.tlog``) is converted once into
+``converted/<sha256>.mcap`` next to the database. The report is written as ``livesweep identify``
+writes it, and the result is stored in the campaign (``results``, kind ``identification``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from livesweep.errors import ConfigError
+
+__all__ = ["identify_selection", "CampaignIdentification", "TRIM_PAD_S"]
+
+#: Trim taken before and after each test point [s] (method §2.2: about 3 s of trim at each end).
+TRIM_PAD_S = 3.0
+
+
+@dataclass(frozen=True)
+class CampaignIdentification:
+    """What ``campaign identify`` did.
+
+    Attributes
+    ----------
+    identification : Identification
+    report : pathlib.Path
+        The ``report.json`` written.
+    test_points : tuple of TestPointRow
+        The test points concatenated, in order.
+    result_id : int
+        Its row in the campaign's ``results``.
+    """
+
+    identification: object
+    report: Path
+    test_points: tuple
+    result_id: int
+
+
+def _mcap_of(campaign, row) -> Path:
+    """The MCAP of a test point's flight: the file itself, or its conversion next to the database."""
+    path = Path(row.flight_path)
+    flight = next(f for f in campaign.flights() if f.id == row.flight_id)
+    if flight.format == "mcap":
+        return path
+    out = Path(campaign.path).parent / "converted" / f"{flight.sha256}.mcap"
+    if not out.is_file():
+        from livesweep.convert import convert
+
+        out.parent.mkdir(parents=True, exist_ok=True)
+        convert(path, out)
+    return out
+
+
+def identify_selection(campaign, out_dir, *, map, swept_input: str, verdict: str | None = "usable", axis=None,
+                       flight=None, conditions=None, outputs=None, band_rad_s=None, transfer_functions=None,
+                       windows_s=None, pad_s: float = TRIM_PAD_S) -> CampaignIdentification:
+    """Identify the test points of ``swept_input`` the filters select, concatenated, into ``out_dir``.
+
+    Parameters
+    ----------
+    campaign : Campaign
+    out_dir : str or Path
+        Where the case file and the report go.
+    map : str, Path or ChannelMap
+        The channel map whose signals the flights carry (a preset name or a file).
+    swept_input : str
+        The input swept (the map's name for it); the identification's only input. A test point
+        found offline (an autopilot's SystemID run, no input named) sweeps the input the map's
+        ``[test_points] axes`` names for its axis.
+    verdict : str or None
+        ``"usable"`` (default): GO, or not judged (found offline); ``"GO"``, ``"NO-GO"``, ``"none"``:
+        that verdict only; None: any. Runs whose signals the log does not hold are left out.
+    axis, flight, conditions
+        Filters of :meth:`Campaign.test_points`.
+    outputs, band_rad_s, transfer_functions, windows_s
+        As :func:`livesweep.campaign.concat.identify_test_points` (defaults: the map's).
+    pad_s : float
+        Trim taken before and after each test point [s].
+
+    Raises
+    ------
+    ConfigError
+        No test point matches (naming the filters).
+    """
+    from livesweep.campaign.concat import TestPointRef, identify_test_points
+    from livesweep.report.writer import write_report
+
+    from livesweep.maps import load_map
+
+    chosen = load_map(map) if isinstance(map, (str, Path)) else map
+    axes = dict(chosen.test_points.axes) if chosen.test_points is not None else {}
+    rows = [r for r in campaign.test_points(verdict=None if verdict == "usable" else verdict, axis=axis,
+                                            flight=flight, conditions=conditions)
+            if r.start_s is not None and r.end_s is not None
+            and (r.swept_input or axes.get(r.axis)) == swept_input           # found offline: the map's axes say
+            and r.record_dict.get("data", True) is not False                  # a run whose signals the log holds
+            and not (verdict == "usable" and r.verdict not in (None, "GO"))]
+    if not rows:
+        raise ConfigError(f"{campaign.path}: no test point of input {swept_input!r} matches (verdict {verdict}, "
+                          f"axis {axis}, flight {flight}, conditions {conditions})")
+    points = [TestPointRef(_mcap_of(campaign, r), r.start_s - pad_s, r.end_s + pad_s,
+                           f"flight {r.flight_id} TP{r.number}") for r in rows]
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    ident = identify_test_points(points, map=map, inputs=[swept_input], outputs=outputs, band_rad_s=band_rad_s,
+                                 transfer_functions=transfer_functions, out_dir=out, windows_s=windows_s,
+                                 name=f"campaign-{swept_input}")
+    report = write_report(ident, out / "report", plots=True)
+    rid = campaign.add_result([r.id for r in rows], "identification",
+                              {"report": str(report), "swept_input": swept_input, "test_points": len(rows)},
+                              selection={"swept_input": swept_input, "verdict": verdict, "axis": axis,
+                                         "flight": flight, "conditions": conditions})
+    return CampaignIdentification(ident, report, tuple(rows), rid)
