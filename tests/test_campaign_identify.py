@@ -119,3 +119,39 @@ def test_systemid_runs_found_offline_are_identified_from_the_command_line(tmp_pa
         h = H[np.argmin(abs(w - 2 * np.pi * hz))]
         assert abs(abs(h) / mag - 1) <= 0.03 and abs(np.degrees(np.angle(h)) - deg) <= 3.0, (hz, abs(h), np.angle(h, deg=True))
     assert (tmp_path / "converted").is_dir()
+
+
+def test_a_flight_is_identified_from_its_recorded_test_points_without_a_case_file(sitl_replays, tmp_path, capsys):
+    """``livesweep identify REC.mcap --map NAME``: the monitor's recording of the SITL roll chirp
+    gives one report for roll, over its GO test point padded with trim, and fits the recorded
+    model's structure, which agrees with the in-flight model within their combined bounds."""
+    import json
+
+    from livesweep.campaign.flight import plan_flight
+    from livesweep.cli import main
+
+    rec = sitl_replays["roll"].recording
+    go = [t for t in sitl_replays["roll"].test_points if t["verdict"] == "GO"]
+    [plan] = plan_flight(rec, map="ardupilot-sysid-dataflash")
+    assert plan.swept_input == "roll" and len(plan.points) == len(go) == 1
+    assert (plan.points[0].start_s, plan.points[0].end_s) == pytest.approx((go[0]["start_s"] - 3.0, go[0]["end_s"] + 3.0))
+    assert list(plan.transfer_functions.values()) == [
+        {"output": "p", "input": "roll", "numerator": "", "denominator": "(1/T)", "delay": True}]
+    assert main(["identify", str(rec), "--map", "ardupilot-sysid-dataflash", "--out", str(tmp_path / "f"),
+                 "--no-plots"]) == 0
+    report = json.loads((tmp_path / "f" / "roll" / "report.json").read_text())
+    [live] = report["live_models"]
+    [pair] = live["pairs"]
+    assert pair["comparison"] is not None
+    assert all(abs(row["bounds"]) <= 1.0 for row in pair["comparison"]["parameters"]), pair["comparison"]
+
+
+def test_a_flight_without_usable_test_points_says_so(tmp_path):
+    from livesweep.campaign.flight import plan_flight
+    from livesweep.errors import ConfigError
+
+    log = tmp_path / "quiet.mcap"
+    write_sim_log(simulate(sweep_scenario("xv15-cruise", axes=("da",), repeats=1, omega_min_rad_s=0.7,
+                                          omega_max_rad_s=15.0, duration_s=20.0, amplitudes={"da": 3.0}, seed=3)), log)
+    with pytest.raises(ConfigError, match="no usable test point"):
+        plan_flight(log, map=MAP)

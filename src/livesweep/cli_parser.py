@@ -112,8 +112,13 @@ def build_parser() -> argparse.ArgumentParser:
     _add_monitor_options(r)
     r.set_defaults(func=cmd_replay)
 
-    i = sub.add_parser("identify", help="identify from a case file (docs/case-file.md) and write report.json, report.html, plots")
-    i.add_argument("case", help="case file (TOML)")
+    i = sub.add_parser("identify", help="identify from a case file (docs/case-file.md), or from a flight's recorded "
+                                        "test points with --map, and write report.json, report.html, plots")
+    i.add_argument("case", help="case file (TOML), or a flight log (MCAP) with --map")
+    i.add_argument("--map", help="with a flight log instead of a case: its channel map (a preset name or a file); "
+                                 "each swept input's GO (or not judged) test points are identified together, one "
+                                 "report per input in OUT/<input>")
+    i.add_argument("--input", dest="swept_input", metavar="NAME", help="with --map: only this swept input")
     i.add_argument("--out", required=True, help="folder for the report")
     i.add_argument("--stage", default="residual-loop", choices=list(STAGES),
                    help="last stage to run (default: every stage the case defines)")
@@ -228,7 +233,8 @@ EXAMPLES = {
                 "livesweep monitor --zenoh 'drone/**' --case my_case.toml --record flight.mcap --rerun-save flight.rrd"],
     "replay": ["livesweep replay flight.mcap", "livesweep replay flight.mcap --map ardupilot-copter-pid --speed 4"],
     "identify": ["livesweep identify config/xv15_cruise_lateral.toml --out out/cruise",
-                 "livesweep identify my_case.toml --out out/quick --stage frequency-response --no-plots"],
+                 "livesweep identify my_case.toml --out out/quick --stage frequency-response --no-plots",
+                 "livesweep identify flight.mcap --map ardupilot-sysid-dataflash --out out/flight"],
     "maps": ["livesweep maps"],
     "convert": ["livesweep convert 00000012.BIN --out flight.mcap",
                 "livesweep convert sweep.npy --columns config/xplane_c172_columns.toml --out sweep.mcap"],

@@ -17,11 +17,41 @@ def cmd_identify(args) -> int:
     from livesweep.report.writer import prepare_out_dir
     from livesweep.stages.identify import identify
 
+    if getattr(args, "map", None):
+        return _identify_flight(args)
+    if getattr(args, "swept_input", None):
+        from livesweep.errors import ConfigError
+
+        raise ConfigError("--input selects a swept input of a flight log: give it with --map")
     with folder_lock(prepare_out_dir(args.out)):
         case = load_case(args.case)
         progress = progress_printer()
         ident = identify(case, until=args.stage, progress=progress)
         present_identification(ident, args.out, plots=getattr(args, "plots", True), progress=progress)
+    return 0
+
+
+def _identify_flight(args) -> int:
+    """``identify FLIGHT.mcap --map NAME``: each swept input's test points as one case, a report each."""
+    from pathlib import Path
+
+    from livesweep.campaign.concat import identify_test_points
+    from livesweep.campaign.flight import plan_flight
+    from livesweep.locks import folder_lock
+    from livesweep.report.writer import prepare_out_dir
+
+    plans = plan_flight(args.case, map=args.map, swept_input=args.swept_input)
+    stem = Path(args.case).stem
+    for plan in plans:
+        out = Path(args.out) / plan.swept_input
+        with folder_lock(prepare_out_dir(out)):
+            progress = progress_printer()
+            progress(f"{stem}: {len(plan.points)} test point(s) of {plan.swept_input}: "
+                     + ", ".join(f"{p.label} ({p.start_s:.1f}-{p.end_s:.1f} s)" for p in plan.points))
+            ident = identify_test_points(plan.points, map=args.map, inputs=[plan.swept_input],
+                                         transfer_functions=plan.transfer_functions or None, out_dir=out,
+                                         name=f"{stem}-{plan.swept_input}")
+            present_identification(ident, out, plots=getattr(args, "plots", True), progress=progress)
     return 0
 
 
