@@ -155,3 +155,24 @@ def test_a_flight_without_usable_test_points_says_so(tmp_path):
                                           omega_max_rad_s=15.0, duration_s=20.0, amplitudes={"da": 3.0}, seed=3)), log)
     with pytest.raises(ConfigError, match="no usable test point"):
         plan_flight(log, map=MAP)
+
+
+def test_the_maps_conditions_of_a_recording_are_the_test_points_conditions(sitl_mcaps, tmp_path):
+    """A recording made with ``[test_points] conditions = ["alt"]`` (CTUN.Alt) gives its test point
+    that altitude in the campaign, and a condition range selects it; the value is the mean over the
+    test point that pymavlink's reading of CTUN gives (tests/test_model_sitl.py checks that mean)."""
+    import livesweep
+    import livesweep.campaign as lc
+
+    base = ROOT / "src" / "livesweep" / "data" / "maps" / "ardupilot-sysid-dataflash.toml"
+    text = base.read_text().replace("min_duration_s = 10.0", 'min_duration_s = 10.0\nconditions = ["alt"]')
+    text = text.replace("[spectral]", '[signals.alt]\ntopic = "/dataflash/CTUN"\nfield = "Alt"\nstamp = "TimeUS"\n'
+                        'stamp_scale = 1e-6\nunits = "m"\n\n[spectral]')
+    (tmp_path / "map.toml").write_text(text)
+    r = livesweep.replay(sitl_mcaps["roll"], map=str(tmp_path / "map.toml"), record=tmp_path / "rec.mcap")
+    alt = r.models[0]["test_point"]["conditions"]["alt"]
+    with lc.open(tmp_path / "c.db") as c:
+        c.add([tmp_path / "rec.mcap"])
+        [row] = c.test_points(conditions={"alt": (alt - 1.0, alt + 1.0)})
+        assert row.verdict == "GO" and row.condition("alt") == pytest.approx(alt)
+        assert c.test_points(conditions={"alt": (0.0, alt - 5.0)}) == []

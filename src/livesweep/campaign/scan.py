@@ -35,6 +35,9 @@ __all__ = ["ScannedFile", "scan_file", "sha256_of", "TEST_POINT_TOPIC"]
 
 #: The monitor's test-point channel in its recordings.
 TEST_POINT_TOPIC = "/livesweep/test_point"
+#: The monitor's model channel: its ``test_point.conditions`` (the map's conditions averaged over
+#: each test point) join the test point's conditions.
+MODEL_TOPIC = "/livesweep/model"
 _CHUNK = 1 << 20
 
 _WHAT = re.compile(r"magnitude (?P<mag>[-+0-9.eE]+), (?P<f0>[0-9.eE+-]+)-(?P<f1>[0-9.eE+-]+) Hz .*? in "
@@ -86,8 +89,17 @@ def _recorded(path: Path) -> list[dict] | None:
     """The monitor's closed test points of an MCAP recording, or None when it has no such channel."""
     from livesweep.telemetry.mcap_read import read_messages, read_summary
 
-    if TEST_POINT_TOPIC not in read_summary(path).message_counts:
+    counts = read_summary(path).message_counts
+    if TEST_POINT_TOPIC not in counts:
         return None
+    measured = {}                 # start_s -> the map's conditions averaged over it (its recorded model)
+    if MODEL_TOPIC in counts:
+        for m in read_messages(path, topics=MODEL_TOPIC):
+            tp = m.data.get("test_point") if isinstance(m.data, dict) else None
+            if isinstance(tp, dict) and isinstance(tp.get("conditions"), dict):
+                measured[tp.get("start_s")] = {k: float(v) for k, v in tp["conditions"].items()
+                                               if isinstance(v, (int, float)) and not isinstance(v, bool)
+                                               and math.isfinite(v)}
     out = []
     for m in read_messages(path, topics=TEST_POINT_TOPIC):
         d = m.data
@@ -99,6 +111,7 @@ def _recorded(path: Path) -> list[dict] | None:
             v = d.get(k)
             if isinstance(v, (int, float)) and not isinstance(v, bool):
                 cond[k] = float(v)
+        cond.update(measured.get(d.get("start_s"), {}))
         axis = d.get("axis")
         out.append({"start_s": _finite(d.get("start_s")), "end_s": _finite(d.get("end_s")),
                     "swept_input": d.get("swept_input"), "axis": axis if isinstance(axis, int) else None,
