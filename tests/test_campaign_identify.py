@@ -176,3 +176,22 @@ def test_the_maps_conditions_of_a_recording_are_the_test_points_conditions(sitl_
         [row] = c.test_points(conditions={"alt": (alt - 1.0, alt + 1.0)})
         assert row.verdict == "GO" and row.condition("alt") == pytest.approx(alt)
         assert c.test_points(conditions={"alt": (0.0, alt - 5.0)}) == []
+
+
+def test_every_input_runs_on_the_batch_engine_as_the_direct_call_does(campaign):
+    """``identify_all``: one case per swept input with usable test points, run by the batch engine
+    (a process pool); its report's p/da response is the one the direct call computes on the same
+    test points (same case, other process)."""
+    import json
+
+    from livesweep.campaign.identify import identify_all, identify_selection
+
+    c, tmp = campaign
+    rows = identify_all(c, tmp / "all", map=MAP, workers=1)
+    assert [Path(r["case"]).name for r in rows] == ["da.toml"] and rows[0]["status"] == "ok", rows
+    report = json.loads((Path(rows[0]["out"]) / "report.json").read_text())
+    batch = next(p for p in report["frequency_responses"] if (p["output"], p["input"]) == ("p", "da"))
+    direct = identify_selection(c, tmp / "direct", map=MAP, swept_input="da").identification.responses.pair("p", "da")
+    assert np.allclose(batch["omega_rad_s"], direct.omega, rtol=1e-9)
+    mag = np.array(batch["magnitude_db"], dtype=float)           # null (not finite) as NaN
+    assert np.allclose(mag, direct.magnitude_db, atol=1e-6, equal_nan=True)

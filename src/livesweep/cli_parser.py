@@ -208,7 +208,9 @@ def build_parser() -> argparse.ArgumentParser:
                                     "and test point in one SQLite file. `campaign add DB FILES...` adds logs; "
                                     "`campaign list DB` lists test points (--axis, --input, --verdict, --flight); "
                                     "`campaign identify DB --map M --input IN --out DIR` identifies the selected test "
-                                    "points of one input across flights, concatenated.")
+                                    "points of one input across flights, concatenated; `campaign report DB --out DIR` "
+                                    "writes one HTML page of the test points, their responses overlaid and their "
+                                    "parameters against a condition (--input, --condition).")
     add_campaign_arguments(cp)
 
     d = sub.add_parser("demo", help="fly simulated XV-15 sweeps live into the monitor, record them, identify frequency responses")

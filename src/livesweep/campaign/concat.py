@@ -40,7 +40,7 @@ from livesweep.report.case_file import dumps_toml
 from livesweep.settings import SignalSpec
 from livesweep.stages.frequency_response import KINEMATIC_PAIRS
 
-__all__ = ["TestPointRef", "case_for_test_points", "identify_test_points"]
+__all__ = ["TestPointRef", "case_for_test_points", "case_text_for_map", "identify_test_points"]
 
 
 @dataclass(frozen=True)
@@ -219,8 +219,31 @@ def identify_test_points(points: Sequence[TestPointRef], *, map, inputs=None, ou
         A map without ``[spectral]`` when inputs, outputs, band or rate are not all given; anything
         :func:`livesweep.config.load_case` or the stages refuse (naming the written case file).
     """
-    from livesweep.maps import load_map
     from livesweep.stages.identify import identify
+
+    text = case_text_for_map(points, map=map, inputs=inputs, outputs=outputs, band_rad_s=band_rad_s,
+                             transfer_functions=transfer_functions, name=name, sample_rate_hz=sample_rate_hz,
+                             windows_s=windows_s, criteria=criteria)
+    until = "transfer-functions" if transfer_functions else "frequency-response"
+    if out_dir is not None:
+        folder = Path(out_dir)
+        folder.mkdir(parents=True, exist_ok=True)
+        case_path = folder / f"{_slug(name)}.toml"
+        case_path.write_text(text)
+        return identify(case_path, until=until)
+    with tempfile.TemporaryDirectory(prefix="livesweep-concat-") as tmp:
+        case_path = Path(tmp) / f"{_slug(name)}.toml"
+        case_path.write_text(text)
+        return identify(case_path, until=until)
+
+
+def case_text_for_map(points: Sequence[TestPointRef], *, map, inputs=None, outputs=None, band_rad_s=None,
+                      transfer_functions: dict | None = None, name: str = "concatenated test points",
+                      sample_rate_hz: float | None = None, windows_s=None, criteria=None) -> str:
+    """The case-file text :func:`identify_test_points` identifies (same parameters): the map's
+    signals of the inputs and outputs (and their kinematic partners), its band, rate and criteria
+    where not given."""
+    from livesweep.maps import load_map
 
     cmap = map if isinstance(map, ChannelMap) else load_map(map if isinstance(map, os.PathLike) else str(map))
     sp = cmap.spectral
@@ -239,14 +262,4 @@ def identify_test_points(points: Sequence[TestPointRef], *, map, inputs=None, ou
         sample_rate_hz=sp.sample_rate_hz if sample_rate_hz is None else sample_rate_hz, name=name,
         transfer_functions=transfer_functions, criteria=cmap.criteria if criteria is None else criteria,
         windows_s=windows_s)
-    until = "transfer-functions" if transfer_functions else "frequency-response"
-    if out_dir is not None:
-        folder = Path(out_dir)
-        folder.mkdir(parents=True, exist_ok=True)
-        case_path = folder / f"{_slug(name)}.toml"
-        case_path.write_text(text)
-        return identify(case_path, until=until)
-    with tempfile.TemporaryDirectory(prefix="livesweep-concat-") as tmp:
-        case_path = Path(tmp) / f"{_slug(name)}.toml"
-        case_path.write_text(text)
-        return identify(case_path, until=until)
+    return text

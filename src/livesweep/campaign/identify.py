@@ -17,7 +17,7 @@ from pathlib import Path
 
 from livesweep.errors import ConfigError
 
-__all__ = ["identify_selection", "CampaignIdentification", "TRIM_PAD_S"]
+__all__ = ["identify_selection", "identify_all", "CampaignIdentification", "TRIM_PAD_S"]
 
 #: Trim taken before and after each test point [s] (method §2.2: about 3 s of trim at each end).
 TRIM_PAD_S = 3.0
@@ -59,6 +59,54 @@ def _mcap_of(campaign, row) -> Path:
     return out
 
 
+def _usable(campaign, map, *, verdict="usable", axis=None, flight=None, conditions=None) -> list:
+    """``(row, swept input)`` of the test points the filters select whose input is known (a run found
+    offline takes it from the map's ``[test_points] axes``) and whose signals the log holds."""
+    from livesweep.maps import load_map
+
+    chosen = load_map(map) if isinstance(map, (str, Path)) else map
+    axes = dict(chosen.test_points.axes) if chosen.test_points is not None else {}
+    out = []
+    for r in campaign.test_points(verdict=None if verdict == "usable" else verdict, axis=axis, flight=flight,
+                                  conditions=conditions):
+        inp = r.swept_input or axes.get(r.axis)
+        if (inp and r.start_s is not None and r.end_s is not None
+                and r.record_dict.get("data", True) is not False
+                and not (verdict == "usable" and r.verdict not in (None, "GO"))):
+            out.append((r, inp))
+    return out
+
+
+def identify_all(campaign, out_dir, *, map, verdict: str | None = "usable", workers: int | None = None,
+                 dask_address: str | None = None, pad_s: float = TRIM_PAD_S, progress=None) -> list[dict]:
+    """Every swept input's selected test points, concatenated, as one case each, identified on the
+    batch engine (:func:`livesweep.batch.run_batch`: a process pool, or a Dask cluster).
+
+    Writes ``out_dir/cases/<input>.toml`` and the reports under ``out_dir/reports``; returns the
+    batch's rows (one per input: status, pairs, coherent band, J). Parameters as
+    :func:`identify_selection`; ``workers`` and ``dask_address`` as ``livesweep batch``.
+    """
+    from livesweep.batch import run_batch
+    from livesweep.campaign.concat import TestPointRef, case_text_for_map
+
+    groups: dict[str, list] = {}
+    for r, inp in _usable(campaign, map, verdict=verdict):
+        groups.setdefault(inp, []).append(r)
+    if not groups:
+        raise ConfigError(f"{campaign.path}: no usable test point (verdict {verdict}) to identify")
+    cases = Path(out_dir) / "cases"
+    cases.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for inp, rows in groups.items():
+        points = [TestPointRef(_mcap_of(campaign, r), r.start_s - pad_s, r.end_s + pad_s,
+                               f"flight {r.flight_id} TP{r.number}") for r in rows]
+        path = cases / f"{inp}.toml"
+        path.write_text(case_text_for_map(points, map=map, inputs=[inp], name=f"campaign-{inp}"))
+        paths.append(path)
+    return run_batch(paths, Path(out_dir) / "reports", stage="frequency-response", workers=workers,
+                     dask_address=dask_address, progress=progress)
+
+
 def identify_selection(campaign, out_dir, *, map, swept_input: str, verdict: str | None = "usable", axis=None,
                        flight=None, conditions=None, outputs=None, band_rad_s=None, transfer_functions=None,
                        windows_s=None, pad_s: float = TRIM_PAD_S) -> CampaignIdentification:
@@ -93,16 +141,9 @@ def identify_selection(campaign, out_dir, *, map, swept_input: str, verdict: str
     from livesweep.campaign.concat import TestPointRef, identify_test_points
     from livesweep.report.writer import write_report
 
-    from livesweep.maps import load_map
-
-    chosen = load_map(map) if isinstance(map, (str, Path)) else map
-    axes = dict(chosen.test_points.axes) if chosen.test_points is not None else {}
-    rows = [r for r in campaign.test_points(verdict=None if verdict == "usable" else verdict, axis=axis,
-                                            flight=flight, conditions=conditions)
-            if r.start_s is not None and r.end_s is not None
-            and (r.swept_input or axes.get(r.axis)) == swept_input           # found offline: the map's axes say
-            and r.record_dict.get("data", True) is not False                  # a run whose signals the log holds
-            and not (verdict == "usable" and r.verdict not in (None, "GO"))]
+    rows = [r for r in _usable(campaign, map, verdict=verdict, axis=axis, flight=flight, conditions=conditions)
+            if r[1] == swept_input]
+    rows = [r for r, _ in rows]
     if not rows:
         raise ConfigError(f"{campaign.path}: no test point of input {swept_input!r} matches (verdict {verdict}, "
                           f"axis {axis}, flight {flight}, conditions {conditions})")

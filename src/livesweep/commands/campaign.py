@@ -13,7 +13,7 @@ __all__ = ["cmd_campaign", "add_campaign_arguments"]
 
 def add_campaign_arguments(p) -> None:
     """The ``campaign`` verb's sub-verbs (``add``, ``list``) on its parser ``p``."""
-    sub = p.add_subparsers(dest="campaign_verb", metavar="{add,list,identify}", required=True)
+    sub = p.add_subparsers(dest="campaign_verb", metavar="{add,list,identify,report}", required=True)
     a = sub.add_parser("add", help="add log files (.bin, .tlog, .mcap, .ulg) and their test points",
                        description="Add log files to the campaign DB (created when missing). A file whose content "
                                    "(SHA-256) is already in is unchanged; a damaged or unreadable one is skipped, "
@@ -38,13 +38,29 @@ def add_campaign_arguments(p) -> None:
                                        "ardupilot-sysid-dataflash --input roll --out roll-report")
     ident.add_argument("db", help="campaign database (SQLite file)")
     ident.add_argument("--map", required=True, help="channel map: a preset name or a map file")
-    ident.add_argument("--input", dest="swept_input", required=True, metavar="NAME", help="the swept input")
+    ident.add_argument("--input", dest="swept_input", metavar="NAME", help="the swept input")
+    ident.add_argument("--all", action="store_true",
+                       help="every swept input with usable test points, one case each, on the batch engine "
+                            "(OUT/cases, OUT/reports; --workers N or --dask ADDRESS)")
+    ident.add_argument("--workers", type=int, help="with --all: local worker processes (default: the CPUs)")
+    ident.add_argument("--dask", metavar="ADDRESS", help="with --all: a Dask scheduler (tcp://host:8786)")
     ident.add_argument("--out", required=True, help="folder for the case file and the report")
     ident.add_argument("--verdict", default="usable",
                        help="usable (GO or not judged; default), GO, NO-GO, none, or any")
     ident.add_argument("--axis", type=int, help="SystemID axis number")
     ident.add_argument("--flight", help="flight id, or the start of its SHA-256")
     ident.set_defaults(func=cmd_campaign)
+    rep = sub.add_parser("report", help="one HTML page: test points, their responses overlaid, their parameters",
+                         description="Write DIR/campaign.html: the flights and test points, each pair's recorded "
+                                     "responses (/livesweep/model) overlaid on one Bode plot, and the identified "
+                                     "parameters with their Cramer-Rao bounds against a condition. Example: "
+                                     "livesweep campaign report flights.db --out campaign --input roll")
+    rep.add_argument("db", help="campaign database (SQLite file)")
+    rep.add_argument("--out", required=True, help="folder for campaign.html")
+    rep.add_argument("--input", dest="swept_input", metavar="NAME", help="only the test points of this swept input")
+    rep.add_argument("--condition", metavar="NAME",
+                     help="plot the parameters against this test-point condition (default: test-point order)")
+    rep.set_defaults(func=cmd_campaign)
 
 
 def _fmt(x, nd: int = 3) -> str:
@@ -69,7 +85,7 @@ def cmd_campaign(args) -> int:
     import livesweep.campaign as campaign
     from livesweep.errors import ConfigError
 
-    if args.campaign_verb in ("list", "identify") and not Path(args.db).is_file():
+    if args.campaign_verb in ("list", "identify", "report") and not Path(args.db).is_file():
         raise ConfigError(f"{args.db}: no such campaign database")
     with campaign.open(args.db) as c:
         if args.campaign_verb == "add":
@@ -88,9 +104,19 @@ def cmd_campaign(args) -> int:
                   f"skipped; {n['flights']} flights, {n['test_points']} test points")
             return 0
         if args.campaign_verb == "identify":
-            from livesweep.campaign.identify import identify_selection
+            from livesweep.campaign.identify import identify_all, identify_selection
 
             verdict = None if args.verdict == "any" else args.verdict
+            if args.all:
+                rows = identify_all(c, args.out, map=args.map, verdict=verdict, workers=args.workers,
+                                    dask_address=args.dask)
+                for row in rows:
+                    print(f"{row.get('case', '?')}: {row.get('status', '?')}"
+                          + (f" ({row['error']})" if row.get("error") else ""))
+                print(f"wrote {Path(args.out) / 'reports'}")
+                return 0 if all(row.get("status") != "failed" for row in rows) else 1
+            if not args.swept_input:
+                raise ConfigError("campaign identify: give --input NAME, or --all")
             flight = None if args.flight is None else (int(args.flight) if args.flight.isdigit() and
                                                        len(args.flight) < 8 else args.flight)
             done = identify_selection(c, args.out, map=args.map, swept_input=args.swept_input, verdict=verdict,
@@ -99,6 +125,11 @@ def cmd_campaign(args) -> int:
                   + ", ".join(f"flight {r.flight_id} TP{r.number} ({r.start_s:.1f}-{r.end_s:.1f} s)"
                               for r in done.test_points))
             print(f"wrote {done.report}")
+            return 0
+        if args.campaign_verb == "report":
+            from livesweep.campaign.report import write_campaign_report
+
+            print(f"wrote {write_campaign_report(c, args.out, swept_input=args.swept_input, condition=args.condition)}")
             return 0
         if args.flights:
             print(_table(["id", "sha256", "format", "vehicle", "date", "test points", "path"],
