@@ -212,3 +212,17 @@ def test_a_bad_prediction_is_refused_naming_its_key(tmp_path, table, message):
         read_channel_map(m)
     assert str(m) in str(e.value) and message in str(e.value)
     assert "\n" not in str(e.value)
+
+
+def test_a_quadratic_more_damped_than_two_is_flagged_as_two_real_roots():
+    # two real poles (2 and 12 rad/s) with a first-order fit far from excellent: the second-order
+    # model fits them as one quadratic of damping (2 + 12) / (2 sqrt(24)) = 1.43 < 2, so no flag;
+    # poles at 1 and 40 rad/s give 41 / (2 sqrt(40)) = 3.2 > 2: flagged
+    s = 1j * W
+    for (a, b), flagged in (((2.0, 12.0), False), ((1.0, 40.0), True)):
+        H = a * b / ((s + a) * (s + b)) * np.exp(-0.01 * s)
+        pm = model_pair(_resp(H), output_units="deg/s")
+        assert pm.structure == "second order"          # first order is far from excellent on two poles
+        zeta = _param(pm, "zeta").value
+        assert zeta == pytest.approx((a + b) / (2 * np.sqrt(a * b)), rel=1e-3)
+        assert any("degenerate quadratic" in f for f in pm.flags) == flagged, (a, b, pm.flags)

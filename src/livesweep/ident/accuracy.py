@@ -48,7 +48,7 @@ from livesweep.numeric import frozen_array as _frozen
 
 __all__ = ["Accuracy", "accuracy_from_jacobian", "MONTE_CARLO_SCATTER_OVER_CR", "MAX_CRAMER_RAO_PCT",
            "parameter_report", "guideline_failures", "pct_text", "NOT_DETERMINED_PCT", "MAX_INSENSITIVITY_PCT",
-           "MAX_CORRELATION", "MAX_COST", "MAX_COST_AVERAGE"]
+           "MAX_CORRELATION", "MAX_COST", "MAX_COST_AVERAGE", "MAX_QUADRATIC_ZETA"]
 
 #: Observed scatter (std) of Monte-Carlo estimates divided by the mean raw Cramer-Rao bound, median
 #: over parameters (module docstring; XV-15 cruise simulator, 80 realisations).
@@ -65,6 +65,9 @@ NOT_DETERMINED_PCT = 1000.0
 #: a state-space fit; above them the model does not describe the data well enough to use.
 MAX_COST = 100.0
 MAX_COST_AVERAGE = 100.0
+#: A second-order factor more damped than this is two first-order ones (its fit is degenerate: the
+#: data cannot tell the quadratic from the two real roots it stands for).
+MAX_QUADRATIC_ZETA = 2.0
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,8 @@ parametric result of each pair it judged, with the same code and criteria as off
   Cramer-Rao bound propagated from the parameters' covariance (``sigma_f^2 = g^T C g``, ``g`` the
   figure's gradient by central differences).
 * **Flags** where the method says not to trust a value: J > 100, CR% > 20, I% > 10, a parameter
-  the data do not determine, a figure read outside the fitted band.
+  the data do not determine, a figure read outside the fitted band, a quadratic more damped than
+  ``MAX_QUADRATIC_ZETA`` (two real roots).
 * **Limits and the prediction** (:mod:`livesweep.ident.envelope`): each limit set is checked, with
   the value's bound in the text ("phase margin 38 +/- 3 deg, limit 45 deg: do not proceed").
 
@@ -34,7 +35,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from livesweep.errors import ConfigError
-from livesweep.ident.accuracy import MAX_COST, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT, NOT_DETERMINED_PCT
+from livesweep.ident.accuracy import (MAX_COST, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT, MAX_QUADRATIC_ZETA,
+                                      NOT_DETERMINED_PCT)
 from livesweep.ident.cost import fit_points, pair_cost
 from livesweep.ident.envelope import NO_LIMITS, EnvelopeLimits, Prediction
 from livesweep.ident.handling import crossover_and_margins, handling_qualities
@@ -345,6 +347,10 @@ def _fit_flags(fit, params) -> tuple:
     if not fit.cost <= MAX_COST:
         flags.append(f"J {fit.cost:.3g} > {MAX_COST:g}: the model does not describe the data")
     flags += [f"{p.name}: {f}" for p in params for f in p.flags]
+    for fac in fit.factors:
+        if fac["kind"] == "second" and fac["where"] == "denominator" and fac["zeta"] > MAX_QUADRATIC_ZETA:
+            flags.append(f"{fac['names'][0] or 'zeta'} {fac['zeta']:.3g} > {MAX_QUADRATIC_ZETA:g}: a degenerate "
+                         "quadratic, two first-order factors")
     return tuple(flags)
 
 

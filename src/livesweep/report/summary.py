@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 
 from livesweep.ident.accuracy import (MAX_COST, MAX_COST_AVERAGE, MAX_CRAMER_RAO_PCT, MAX_INSENSITIVITY_PCT,
-                                      NOT_DETERMINED_PCT, pct_text)
+                                      MAX_QUADRATIC_ZETA, NOT_DETERMINED_PCT, pct_text)
 from livesweep.ident.verify import J_RMS_MAX, TIC_MAX
 from livesweep.spectral.criteria import DEFAULT_CRITERIA, Criteria
 
@@ -29,7 +29,7 @@ GUIDELINES = {
     "insensitivity_pct": MAX_INSENSITIVITY_PCT,    # insensitivity, % of its value
     "j_rms": J_RMS_MAX,                            # time-domain verification
     "tic": TIC_MAX,                                # Theil inequality coefficient
-    "zeta_max": 2.0,             # a second-order factor more damped than this is two first-order ones
+    "zeta_max": MAX_QUADRATIC_ZETA,    # a second-order factor more damped than this is two first-order ones
     "not_identifiable_pct": NOT_DETERMINED_PCT,   # CR beyond this: the data say nothing about the parameter
 }
 
