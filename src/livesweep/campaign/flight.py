@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from livesweep.campaign.identify import TRIM_PAD_S
+from livesweep.campaign.identify import TRIM_PAD_S, swept_input_of, usable
 from livesweep.errors import ConfigError
 
 __all__ = ["FlightPlan", "plan_flight", "MODEL_TOPIC"]
@@ -90,9 +90,8 @@ def plan_flight(path, *, map, swept_input: str | None = None) -> list[FlightPlan
     scanned = scan_file(path)
     groups: dict[str, list] = {}
     for tp in scanned.test_points:
-        inp = tp.get("swept_input") or axes.get(tp.get("axis"))
-        usable = tp.get("verdict") in (None, "GO") and (tp.get("record") or {}).get("data", True) is not False
-        if inp and usable and tp.get("start_s") is not None and tp.get("end_s") is not None \
+        inp = swept_input_of(tp.get("swept_input"), tp.get("axis"), axes)
+        if inp and usable(tp.get("start_s"), tp.get("end_s"), tp.get("record"), tp.get("verdict")) \
                 and (swept_input is None or inp == swept_input):
             groups.setdefault(inp, []).append(tp)
     if not groups:

@@ -47,10 +47,11 @@ class CampaignIdentification:
 def _mcap_of(campaign, row) -> Path:
     """The MCAP of a test point's flight: the file itself, or its conversion next to the database."""
     path = Path(row.flight_path)
-    flight = next(f for f in campaign.flights() if f.id == row.flight_id)
-    if flight.format == "mcap":
+    sha, fmt = campaign.connection.execute("SELECT sha256, format FROM flights WHERE id = ?",
+                                           (row.flight_id,)).fetchone()
+    if fmt == "mcap":
         return path
-    out = Path(campaign.path).parent / "converted" / f"{flight.sha256}.mcap"
+    out = Path(campaign.path).parent / "converted" / f"{sha}.mcap"
     if not out.is_file():
         from livesweep.convert import convert
 
@@ -69,12 +70,22 @@ def _usable(campaign, map, *, verdict="usable", axis=None, flight=None, conditio
     out = []
     for r in campaign.test_points(verdict=None if verdict == "usable" else verdict, axis=axis, flight=flight,
                                   conditions=conditions):
-        inp = r.swept_input or axes.get(r.axis)
-        if (inp and r.start_s is not None and r.end_s is not None
-                and r.record_dict.get("data", True) is not False
-                and not (verdict == "usable" and r.verdict not in (None, "GO"))):
+        inp = swept_input_of(r.swept_input, r.axis, axes)
+        if inp and usable(r.start_s, r.end_s, r.record_dict, None if verdict != "usable" else r.verdict):
             out.append((r, inp))
     return out
+
+
+def swept_input_of(swept_input, axis, axes: dict):
+    """The input a test point sweeps: its own, or for a run found offline the map's ``axes`` entry."""
+    return swept_input or axes.get(axis)
+
+
+def usable(start_s, end_s, record: dict, verdict) -> bool:
+    """A test point that can be identified: its span is known, its log holds the signals of the run,
+    and it is GO or not judged (``verdict`` None: not asked)."""
+    return (start_s is not None and end_s is not None and (record or {}).get("data", True) is not False
+            and verdict in (None, "GO"))
 
 
 def identify_all(campaign, out_dir, *, map, verdict: str | None = "usable", workers: int | None = None,
